@@ -1,0 +1,272 @@
+//! Measurement models: what the data logger does to the plant's signals.
+//!
+//! Separate from the plant on purpose: the same [`crate::Trace`] can be seen through an ideal
+//! instrument or through the paper's logger (10-bit ADC over 0–5 V conditioned ranges, a
+//! noisy tachometer, a quadrature encoder).
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{positive, ModelError};
+use crate::sim::simulator::Trace;
+
+/// Physical range [lo, hi] (SI units) mapped by a channel's signal conditioning onto the
+/// ADC's 0–5 V input; values outside clip at the rails.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Range {
+    /// Value at 0 V (ADC count 0).
+    pub lo: f64,
+    /// Value at full scale (ADC count 2^bits − 1).
+    pub hi: f64,
+}
+
+impl Range {
+    /// A validated range: finite, `lo < hi`.
+    pub fn new(lo: f64, hi: f64) -> Result<Self, ModelError> {
+        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+            return Err(ModelError::InvalidSetting {
+                name: format!("range [{lo}, {hi}]"),
+                value: hi - lo,
+                expected: "finite bounds with lo < hi",
+            });
+        }
+        Ok(Range { lo, hi })
+    }
+
+    /// A range covering `[min, max]` of `values` with 20 % headroom each side.
+    pub fn covering(values: &[f64]) -> Self {
+        let (mut lo, mut hi) = values
+            .iter()
+            .filter(|v| v.is_finite())
+            .fold((0.0_f64, 0.0_f64), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+        if hi - lo <= 0.0 {
+            hi = lo + 1.0;
+        }
+        let pad = 0.2 * (hi - lo);
+        if lo < 0.0 {
+            lo -= pad;
+        }
+        Range { lo, hi: hi + pad }
+    }
+}
+
+/// An ADC of `bits` resolution [-] shared by all analog channels.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Adc {
+    /// Resolution in bits (the PIC 16F877: 10).
+    pub bits: u8,
+}
+
+impl Adc {
+    /// The largest count, `2^bits − 1`.
+    pub fn full_scale_counts(&self) -> u32 {
+        (1u32 << self.bits.min(31)) - 1
+    }
+
+    /// Converts a physical value to ADC counts through `range`, clipping at the rails.
+    pub fn to_counts(&self, range: Range, value: f64) -> u32 {
+        let fs = f64::from(self.full_scale_counts());
+        let c = ((value - range.lo) / (range.hi - range.lo) * fs).round();
+        if c.is_nan() {
+            0
+        } else {
+            c.clamp(0.0, fs) as u32
+        }
+    }
+
+    /// Converts ADC counts back to the physical value through `range`.
+    pub fn to_value(&self, range: Range, counts: u32) -> f64 {
+        let fs = f64::from(self.full_scale_counts());
+        range.lo + f64::from(counts) / fs * (range.hi - range.lo)
+    }
+
+    /// One least significant bit of `range` in its physical unit.
+    pub fn lsb(&self, range: Range) -> f64 {
+        (range.hi - range.lo) / f64::from(self.full_scale_counts())
+    }
+}
+
+/// Where the record's speed column comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SpeedSource {
+    /// The plant's speed, through the analog chain (tachometer: noise, ADC).
+    Tacho,
+    /// Central difference of the quantised encoder angle, as the paper did.
+    Encoder,
+    /// No speed column.
+    Omit,
+}
+
+/// A measurement chain applied to a simulated [`Trace`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MeasurementModel {
+    /// ADC resolution, or `None` for unquantised values.
+    pub adc: Option<Adc>,
+    /// Conditioning ranges of voltage [V], current [A], tacho speed [rad/s]; `None` = chosen
+    /// from the signal with [`Range::covering`].
+    pub ranges: [Option<Range>; 3],
+    /// Standard deviation of additive white noise on voltage [V], current [A] and tacho speed
+    /// [rad/s], before quantisation.
+    pub noise_std: [f64; 3],
+    /// Encoder counts per revolution after quadrature decoding, or `None` for the exact angle.
+    pub encoder_counts_per_rev: Option<u32>,
+    /// Source of the speed column.
+    pub speed_source: SpeedSource,
+    /// Seed of the noise generator: the same seed gives the same record, sample for sample.
+    pub seed: u64,
+}
+
+impl Default for MeasurementModel {
+    /// An ideal instrument: no ADC, no noise, exact angle, true speed.
+    fn default() -> Self {
+        MeasurementModel {
+            adc: None,
+            ranges: [None; 3],
+            noise_std: [0.0; 3],
+            encoder_counts_per_rev: None,
+            speed_source: SpeedSource::Tacho,
+            seed: 1,
+        }
+    }
+}
+
+/// A measured record in the units of SPEC section 4, ready to be written as CSV.
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+pub struct Record {
+    /// Sample times [s], strictly increasing.
+    pub t: Vec<f64>,
+    /// Armature voltage [V].
+    pub voltage: Vec<f64>,
+    /// Armature current [A].
+    pub current: Vec<f64>,
+    /// Speed [rad/s], if recorded.
+    pub speed: Option<Vec<f64>>,
+    /// Angle [rad], if recorded.
+    pub position: Option<Vec<f64>>,
+    /// Samples of each analog channel (voltage, current, speed) that sat on an ADC rail.
+    pub clipped: [usize; 3],
+}
+
+impl MeasurementModel {
+    /// Measures `trace` through this chain.
+    pub fn apply(&self, trace: &Trace) -> Result<Record, ModelError> {
+        for (name, s) in ["voltage", "current", "speed"].iter().zip(self.noise_std) {
+            if !(s.is_finite() && s >= 0.0) {
+                return Err(ModelError::InvalidSetting {
+                    name: format!("{name} noise"),
+                    value: s,
+                    expected: "a finite standard deviation of zero or more",
+                });
+            }
+        }
+        if let Some(cpr) = self.encoder_counts_per_rev {
+            positive("encoder counts per revolution", f64::from(cpr))?;
+        }
+        let mut rng = NoiseRng::new(self.seed);
+        let mut clipped = [0usize; 3];
+        let position = match self.encoder_counts_per_rev {
+            Some(cpr) => {
+                let quantum = std::f64::consts::TAU / f64::from(cpr);
+                trace
+                    .position
+                    .iter()
+                    .map(|th| (th / quantum).floor() * quantum)
+                    .collect()
+            }
+            None => trace.position.clone(),
+        };
+        let mut channel = |idx: usize, values: &[f64]| -> Vec<f64> {
+            let range = self.ranges[idx].unwrap_or_else(|| Range::covering(values));
+            values
+                .iter()
+                .map(|&v| {
+                    let noisy = v + self.noise_std[idx] * rng.normal();
+                    match self.adc {
+                        Some(adc) => {
+                            let c = adc.to_counts(range, noisy);
+                            if c == 0 || c == adc.full_scale_counts() {
+                                clipped[idx] += 1;
+                            }
+                            adc.to_value(range, c)
+                        }
+                        None => noisy,
+                    }
+                })
+                .collect()
+        };
+        let voltage = channel(0, &trace.voltage);
+        let current = channel(1, &trace.current);
+        let speed = match self.speed_source {
+            SpeedSource::Tacho => Some(channel(2, &trace.speed)),
+            SpeedSource::Encoder => Some(central_difference(&trace.t, &position)),
+            SpeedSource::Omit => None,
+        };
+        Ok(Record {
+            t: trace.t.clone(),
+            voltage,
+            current,
+            speed,
+            position: Some(position),
+            clipped,
+        })
+    }
+}
+
+/// Derivative of `y` over `t` by central differences (one-sided at the ends) [unit of y / s].
+pub fn central_difference(t: &[f64], y: &[f64]) -> Vec<f64> {
+    let n = t.len().min(y.len());
+    (0..n)
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(1), (i + 1).min(n.saturating_sub(1)));
+            let span = t[b] - t[a];
+            if span > 0.0 {
+                (y[b] - y[a]) / span
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// A small deterministic generator (SplitMix64 with Box–Muller normals), so that a seed
+/// reproduces a record bit for bit on every platform and in the `no_std` logger emulator.
+#[derive(Debug, Clone)]
+pub struct NoiseRng {
+    state: u64,
+    spare: Option<f64>,
+}
+
+impl NoiseRng {
+    /// A generator started from `seed`.
+    pub fn new(seed: u64) -> Self {
+        NoiseRng {
+            state: seed,
+            spare: None,
+        }
+    }
+
+    /// Next 64 random bits (SplitMix64, Steele et al. 2014).
+    pub fn next_u64(&mut self) -> u64 {
+        self.state = self.state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in (0, 1].
+    pub fn uniform(&mut self) -> f64 {
+        ((self.next_u64() >> 11) as f64 + 1.0) * (1.0 / (1u64 << 53) as f64)
+    }
+
+    /// Standard normal deviate (Box–Muller, pairs cached).
+    pub fn normal(&mut self) -> f64 {
+        if let Some(s) = self.spare.take() {
+            return s;
+        }
+        let r = (-2.0 * self.uniform().ln()).sqrt();
+        let a = std::f64::consts::TAU * self.uniform();
+        self.spare = Some(r * a.sin());
+        r * a.cos()
+    }
+}

@@ -1,0 +1,3 @@
+pub(crate) mod effects;
+pub(crate) mod input;
+pub(crate) mod simulator;

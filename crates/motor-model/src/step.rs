@@ -1,0 +1,272 @@
+//! Exact step response after breakaway, valid uniformly across ζ < 1, ζ = 1 and ζ > 1.
+//!
+//! After breakaway the motor obeys the linear system (2). With `x = [I, Ω]ᵀ`,
+//! `ẋ = A x + b`, `A = [[−R/L, −k/L], [k/J, −f/J]]`, the deviation `y = x − x_r` from the steady
+//! state (4), (5) evolves as `y(τ) = e^{Aτ} y(0)`, `τ = t − t0`. Because the eigenvalues of `A`
+//! are `−σ ± √q` with `q = σ² − ωn² = ωn²(ζ² − 1)`, Cayley–Hamilton gives, in every regime,
+//!
+//! ```text
+//! e^{Aτ} = e^{−στ} [ C(τ) 𝟙 + S(τ) (A + σ𝟙) ],
+//! C(τ) = Σ (qτ²)ⁿ/(2n)!,   S(τ) = τ Σ (qτ²)ⁿ/(2n+1)!
+//! ```
+//!
+//! i.e. `C = cosh(ωa τ)`, `S = sinh(ωa τ)/ωa` for ζ > 1, `cos`/`sin` for ζ < 1 and `1`, `τ` at
+//! ζ = 1. These are entire functions of `q`, so nothing blows up as ζ → 1, unlike α and γ of
+//! (24), (25) in the paper's forms (13)–(15), which this module reproduces to rounding error
+//! (see the `paper` module and its tests).
+//!
+//! On a uniform grid `C` and `S` obey the addition rule
+//! `C(τ+h) = C(τ)C(h) + q S(τ)S(h)`, `S(τ+h) = S(τ)C(h) + C(τ)S(h)`, so a whole record costs a
+//! few multiply-adds per sample and no transcendental function (re-anchored every
+//! [`REANCHOR_SAMPLES`] samples to stop rounding from accumulating).
+
+use serde::Serialize;
+
+use crate::params::MotorParams;
+use crate::steady::{breakaway_time, standstill_current, steady_state};
+
+/// Samples between exact re-evaluations of the grid recurrence (bounds rounding drift to
+/// about `REANCHOR_SAMPLES` ulps).
+pub const REANCHOR_SAMPLES: usize = 512;
+
+/// Largest `σh` for which the grid recurrence is used; beyond it `e^{−σh}` and `cosh(ωa h)`
+/// approach the limits of `f64` and each sample is evaluated directly.
+const MAX_SIGMA_STEP: f64 = 200.0;
+
+/// Below this `|q τ²|` the series of `C` and `S` is used (8 terms: truncation < 1e-30).
+const SERIES_LIMIT: f64 = 1e-2;
+
+/// One instant of a motor's response.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct MotorState {
+    /// Armature current I [A].
+    pub current_a: f64,
+    /// Shaft speed Ω [rad/s].
+    pub speed_rad_s: f64,
+    /// Shaft angle θ [rad], 0 at the step instant.
+    pub position_rad: f64,
+}
+
+/// `(C(τ), S(τ))` of the module docs for signed `q` [1/s²] and `τ` [s].
+pub(crate) fn cosh_sinhc(q: f64, tau: f64) -> (f64, f64) {
+    let u = q * tau * tau;
+    if u.abs() < SERIES_LIMIT {
+        // Horner on Σ uⁿ/(2n)! and Σ uⁿ/(2n+1)!, n = 0..8.
+        let mut c = 1.0;
+        let mut s = 1.0;
+        for n in (1..=8u32).rev() {
+            let two_n = f64::from(2 * n);
+            c = 1.0 + u * c / (two_n * (two_n - 1.0));
+            s = 1.0 + u * s / (two_n * (two_n + 1.0));
+        }
+        (c, tau * s)
+    } else if q > 0.0 {
+        let w = q.sqrt();
+        ((w * tau).cosh(), (w * tau).sinh() / w)
+    } else {
+        let w = (-q).sqrt();
+        ((w * tau).cos(), (w * tau).sin() / w)
+    }
+}
+
+/// `(e^{−στ}C(τ), e^{−στ}S(τ))` without overflow for any `τ ≥ 0`.
+///
+/// `omega_n2 = ωn² = σ² − q`. For ζ > 1 and `ωa τ` large the product is split into the slow
+/// and fast modes, the slow rate `σ − ωa` being formed as `ωn²/(σ + ωa)` (no cancellation
+/// for strongly overdamped motors, τe ≪ τm).
+pub(crate) fn decayed_cosh_sinhc(sigma: f64, q: f64, omega_n2: f64, tau: f64) -> (f64, f64) {
+    if q > 0.0 {
+        let w = q.sqrt();
+        if w * tau > 1.0 {
+            let fast_rate = sigma + w;
+            let slow = (-(omega_n2 / fast_rate) * tau).exp();
+            let fast = (-fast_rate * tau).exp();
+            return (0.5 * (slow + fast), 0.5 * (slow - fast) / w);
+        }
+    }
+    let decay = (-sigma * tau).exp();
+    let (c, s) = cosh_sinhc(q, tau);
+    (decay * c, decay * s)
+}
+
+/// The exact response of a motor at rest to a voltage step `E` applied at `t = 0`:
+/// Eq. (10) up to the breakaway instant `t0` (11), then the solution of (2), (3).
+///
+/// Either sign of `E`: a negative step is the mirror image. When `|E| ≤ R Ts/k` the motor never
+/// moves and the current follows (10) for ever.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepResponse {
+    params: MotorParams,
+    e_abs: f64,
+    dir: f64,
+    t0: Option<f64>,
+    sigma: f64,
+    q: f64,
+    omega_n2: f64,
+    i_r: f64,
+    omega_r: f64,
+    /// `y(0) = x(t0) − x_r`.
+    y0: [f64; 2],
+    /// `(A + σ𝟙) y(0)`.
+    w0: [f64; 2],
+    /// Speed components of `z = A⁻¹ y(0)` and `(A + σ𝟙) z`, for the angle.
+    z0_speed: f64,
+    wz0_speed: f64,
+}
+
+impl StepResponse {
+    /// Prepares the response of `params` to a step of `e_volt` [V].
+    pub fn new(params: &MotorParams, e_volt: f64) -> Self {
+        let p = *params;
+        let dir = if e_volt < 0.0 { -1.0 } else { 1.0 };
+        let e_abs = e_volt.abs();
+        let t0 = if e_abs > 0.0 {
+            breakaway_time(&p, e_abs)
+        } else {
+            None
+        };
+        let ss = steady_state(&p, e_abs);
+        let (l, r, k, f, j) = (
+            p.l_henry,
+            p.r_ohm,
+            p.k_nm_per_a,
+            p.f_nms_per_rad,
+            p.j_kgm2,
+        );
+        let sigma = 0.5 * (r / l + f / j);
+        let q = crate::derived::signed_damped_pulsation_sq(&p);
+        let omega_n2 = p.rf_plus_k2() / (l * j);
+        let a = [[-r / l, -k / l], [k / j, -f / j]];
+        let y0 = [p.ts_nm / k - ss.current_a, -ss.speed_rad_s];
+        let shifted = |v: [f64; 2]| {
+            [
+                (a[0][0] + sigma) * v[0] + a[0][1] * v[1],
+                a[1][0] * v[0] + (a[1][1] + sigma) * v[1],
+            ]
+        };
+        let w0 = shifted(y0);
+        // A⁻¹ = [[a11', −a01], [−a10, a00]] / det, det = ωn².
+        let z0 = [
+            (a[1][1] * y0[0] - a[0][1] * y0[1]) / omega_n2,
+            (-a[1][0] * y0[0] + a[0][0] * y0[1]) / omega_n2,
+        ];
+        let wz0 = shifted(z0);
+        StepResponse {
+            params: p,
+            e_abs,
+            dir,
+            t0,
+            sigma,
+            q,
+            omega_n2,
+            i_r: ss.current_a,
+            omega_r: ss.speed_rad_s,
+            y0,
+            w0,
+            z0_speed: z0[1],
+            wz0_speed: wz0[1],
+        }
+    }
+
+    /// Breakaway instant t0 [s] of Eq. (11), `None` if the motor never moves.
+    pub fn breakaway_time(&self) -> Option<f64> {
+        self.t0
+    }
+
+    /// Steady current Ir [A] and speed Ωr [rad/s] of Eqs. (4), (5), signed like `E`.
+    pub fn steady(&self) -> (f64, f64) {
+        if self.t0.is_some() {
+            (self.dir * self.i_r, self.dir * self.omega_r)
+        } else {
+            (self.dir * self.e_abs / self.params.r_ohm, 0.0)
+        }
+    }
+
+    #[inline(always)]
+    fn moving_state(&self, tau: f64, ec: f64, es: f64) -> MotorState {
+        MotorState {
+            current_a: self.dir * (self.i_r + ec * self.y0[0] + es * self.w0[0]),
+            speed_rad_s: self.dir * (self.omega_r + ec * self.y0[1] + es * self.w0[1]),
+            position_rad: self.dir
+                * (self.omega_r * tau + ec * self.z0_speed + es * self.wz0_speed - self.z0_speed),
+        }
+    }
+
+    #[inline(always)]
+    fn standstill_state(&self, t: f64) -> MotorState {
+        MotorState {
+            current_a: standstill_current(&self.params, self.dir * self.e_abs, t.max(0.0)),
+            speed_rad_s: 0.0,
+            position_rad: 0.0,
+        }
+    }
+
+    /// Current, speed and angle at time `t_s` [s] after the step (0 for `t < 0`).
+    pub fn at(&self, t_s: f64) -> MotorState {
+        match self.t0 {
+            Some(t0) if t_s > t0 => {
+                let tau = t_s - t0;
+                let (ec, es) = decayed_cosh_sinhc(self.sigma, self.q, self.omega_n2, tau);
+                self.moving_state(tau, ec, es)
+            }
+            _ => self.standstill_state(t_s),
+        }
+    }
+
+    /// Walks the grid `t_i = t_first + i·dt`, calling `emit(i, state)` for each of `n` samples.
+    #[inline(always)]
+    fn walk(&self, t_first: f64, dt: f64, n: usize, mut emit: impl FnMut(usize, MotorState)) {
+        let t_of = |i: usize| t_first + i as f64 * dt;
+        let Some(t0) = self.t0 else {
+            for i in 0..n {
+                emit(i, self.standstill_state(t_of(i)));
+            }
+            return;
+        };
+        let mut i = 0;
+        while i < n && t_of(i) <= t0 {
+            emit(i, self.standstill_state(t_of(i)));
+            i += 1;
+        }
+        if self.sigma * dt > MAX_SIGMA_STEP || !(dt > 0.0) {
+            for j in i..n {
+                emit(j, self.at(t_of(j)));
+            }
+            return;
+        }
+        let (c_h, s_h) = cosh_sinhc(self.q, dt);
+        let decay_h = (-self.sigma * dt).exp();
+        let (step_c, step_qs, step_s) = (decay_h * c_h, decay_h * self.q * s_h, decay_h * s_h);
+        let mut ec = 0.0;
+        let mut es = 0.0;
+        for j in i..n {
+            let tau = t_of(j) - t0;
+            if (j - i) % REANCHOR_SAMPLES == 0 {
+                (ec, es) = decayed_cosh_sinhc(self.sigma, self.q, self.omega_n2, tau);
+            } else {
+                (ec, es) = (ec * step_c + es * step_qs, es * step_c + ec * step_s);
+            }
+            emit(j, self.moving_state(tau, ec, es));
+        }
+    }
+
+    /// Fills `out[i]` with the state at `t_first + i·dt` [s]. No allocation.
+    pub fn fill(&self, t_first: f64, dt: f64, out: &mut [MotorState]) {
+        let n = out.len();
+        self.walk(t_first, dt, n, |i, s| {
+            if let Some(slot) = out.get_mut(i) {
+                *slot = s;
+            }
+        });
+    }
+
+    /// Fills `out[i]` with the current [A] at `t_first + i·dt` [s]. No allocation.
+    pub fn fill_current(&self, t_first: f64, dt: f64, out: &mut [f64]) {
+        let n = out.len();
+        self.walk(t_first, dt, n, |i, s| {
+            if let Some(slot) = out.get_mut(i) {
+                *slot = s.current_a;
+            }
+        });
+    }
+}
