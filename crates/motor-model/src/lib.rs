@@ -31,15 +31,17 @@
 mod derived;
 mod error;
 mod measure;
-mod params;
 pub mod paper;
+mod params;
 mod sim;
 mod steady;
 mod step;
 
 pub use derived::{Derived, Regime};
 pub use error::ModelError;
-pub use measure::{central_difference, Adc, MeasurementModel, NoiseRng, Range, Record, SpeedSource};
+pub use measure::{
+    central_difference, Adc, MeasurementModel, NoiseRng, Range, Record, SpeedSource,
+};
 pub use params::MotorParams;
 pub use sim::effects::{
     BrushDrop, CoggingTorque, CurrentSensorLag, Effect, Effects, InductanceSaturation,

@@ -35,11 +35,37 @@ fn domain(formula: &'static str, reason: String) -> ModelError {
     ModelError::OutOfDomain { formula, reason }
 }
 
+/// α of Eq. (24) where the ζ > 1 forms hold.
+///
+/// They hold iff the zero `−1/τm` of `I_E(s)` (B.6) lies between the slow pole and the origin,
+/// which (the characteristic polynomial being `k² > 0` at both `−1/τm` and `−1/τe`, so that one
+/// of them lies on each side of the poles) is exactly `τm > τe`. Otherwise α may still be real,
+/// but on the other branch, and (13)–(15) give wrong values.
+fn overdamped_alpha(d: &Derived, formula: &'static str) -> Result<f64, ModelError> {
+    match (d.regime, d.alpha) {
+        (Regime::Overdamped, Some(alpha)) if d.tau_m > d.tau_e => Ok(alpha),
+        (Regime::Overdamped, _) => Err(domain(
+            formula,
+            format!(
+                "the zeta > 1 forms need tau_m > tau_e; this motor has tau_m = {} s, tau_e = {} s",
+                d.tau_m, d.tau_e
+            ),
+        )),
+        _ => Err(domain(
+            formula,
+            format!(
+                "it is written for zeta > 1; this motor has zeta = {}",
+                d.zeta
+            ),
+        )),
+    }
+}
+
 /// The current components (12)–(15) at `tau_s` [s] after breakaway of a step `e_volt` [V] ≥ 0,
 /// in the form of the motor's damping regime:
 ///
-/// - ζ > 1, Eqs. (13)–(15) as printed (valid where α of (24) is real, i.e. τm > τe — the
-///   usual servo; otherwise an `OutOfDomain` error);
+/// - ζ > 1, Eqs. (13)–(15) as printed (valid where τm > τe — the usual servo; otherwise an
+///   `OutOfDomain` error);
 /// - ζ < 1, Eqs. (B.11)–(B.13) with the phase taken in the right quadrant (`atan2`) and the sign
 ///   of (B.12) corrected (errata E2, E3);
 /// - ζ = 1, Eqs. (B.14)–(B.16) with (B.16) corrected (erratum E4).
@@ -57,15 +83,7 @@ pub fn current_components(
     let decay = (-sigma * tau_s).exp();
     match d.regime {
         Regime::Overdamped => {
-            let alpha = d.alpha.ok_or_else(|| {
-                domain(
-                    "Eqs. (13)-(15)",
-                    format!(
-                        "alpha of Eq. (24) is not real for this motor (tau_m = {tau_m} s, tau_e = {} s): the forms need tau_m > tau_e",
-                        d.tau_e
-                    ),
-                )
-            })?;
+            let alpha = overdamped_alpha(&d, "Eqs. (13)-(15)")?;
             let gamma = d.gamma.unwrap_or(f64::INFINITY);
             Ok(CurrentComponents {
                 // Eq. (13)
@@ -113,15 +131,8 @@ pub fn current_components(
 /// as printed (ζ > 1 only; the paper gives no other regime — use [`crate::StepResponse`]).
 pub fn speed_c4(p: &MotorParams, e_volt: f64, tau_s: f64) -> Result<f64, ModelError> {
     let d = Derived::new(p);
-    let (Regime::Overdamped, Some(alpha), Some(gamma)) = (d.regime, d.alpha, d.gamma) else {
-        return Err(domain(
-            "Eq. (C.4)",
-            format!(
-                "it is written for zeta > 1 with real alpha; this motor has zeta = {}",
-                d.zeta
-            ),
-        ));
-    };
+    let alpha = overdamped_alpha(&d, "Eq. (C.4)")?;
+    let gamma = d.gamma.unwrap_or(f64::INFINITY);
     let (ts, k, f, l) = (p.ts_nm, p.k_nm_per_a, p.f_nms_per_rad, p.l_henry);
     let (wn, zeta, sigma, wa, tau_m) = (d.omega_n, d.zeta, d.sigma, d.omega_a, d.tau_m);
     let decay = (-sigma * tau_s).exp();
@@ -133,7 +144,8 @@ pub fn speed_c4(p: &MotorParams, e_volt: f64, tau_s: f64) -> Result<f64, ModelEr
             + gamma * gamma / alpha
                 * decay
                 * (wa * tau_s + (-(1.0 - 2.0 * zeta * tau_m * wn) / alpha).asinh()).sinh());
-    let from_e = e_volt * d.k_e * (1.0 - gamma * decay * (wa * tau_s + (1.0 / gamma).asinh()).sinh());
+    let from_e =
+        e_volt * d.k_e * (1.0 - gamma * decay * (wa * tau_s + (1.0 / gamma).asinh()).sinh());
     Ok(k / f * (from_i0 + from_ts + from_e) - ts / f * (1.0 - mech))
 }
 
@@ -147,15 +159,8 @@ pub fn normalized_current_33(alpha: f64, sigma: f64, omega_a: f64, t_s: f64) -> 
 /// after the step (friction and breakaway neglected; valid when (31) holds).
 pub fn high_voltage_current_32(p: &MotorParams, e_volt: f64, t_s: f64) -> Result<f64, ModelError> {
     let d = Derived::new(p);
-    match (d.regime, d.alpha) {
-        (Regime::Overdamped, Some(alpha)) => {
-            Ok(d.k_e * e_volt * normalized_current_33(alpha, d.sigma, d.omega_a, t_s))
-        }
-        _ => Err(domain(
-            "Eq. (32)",
-            format!("it needs zeta > 1 and real alpha; this motor has zeta = {}", d.zeta),
-        )),
-    }
+    let alpha = overdamped_alpha(&d, "Eq. (32)")?;
+    Ok(d.k_e * e_volt * normalized_current_33(alpha, d.sigma, d.omega_a, t_s))
 }
 
 /// Eq. (31): the smallest step voltage [V] for which the approximation (32) errs by less than
@@ -178,7 +183,10 @@ pub fn approximate_speed_c6(p: &MotorParams, e_volt: f64, tau_s: f64) -> Result<
     let (Regime::Overdamped, Some(gamma)) = (d.regime, d.gamma) else {
         return Err(domain(
             "Eq. (C.6)",
-            format!("it is written for zeta > 1; this motor has zeta = {}", d.zeta),
+            format!(
+                "it is written for zeta > 1; this motor has zeta = {}",
+                d.zeta
+            ),
         ));
     };
     /// The paper's empirical divisor of σ in the friction build-up of (C.6).

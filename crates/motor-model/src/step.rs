@@ -126,13 +126,7 @@ impl StepResponse {
             None
         };
         let ss = steady_state(&p, e_abs);
-        let (l, r, k, f, j) = (
-            p.l_henry,
-            p.r_ohm,
-            p.k_nm_per_a,
-            p.f_nms_per_rad,
-            p.j_kgm2,
-        );
+        let (l, r, k, f, j) = (p.l_henry, p.r_ohm, p.k_nm_per_a, p.f_nms_per_rad, p.j_kgm2);
         let sigma = 0.5 * (r / l + f / j);
         let q = crate::derived::signed_damped_pulsation_sq(&p);
         let omega_n2 = p.rf_plus_k2() / (l * j);
@@ -228,7 +222,8 @@ impl StepResponse {
             emit(i, self.standstill_state(t_of(i)));
             i += 1;
         }
-        if self.sigma * dt > MAX_SIGMA_STEP || !(dt > 0.0) {
+        let usable_step = dt > 0.0 && self.sigma * dt <= MAX_SIGMA_STEP;
+        if !usable_step {
             for j in i..n {
                 emit(j, self.at(t_of(j)));
             }

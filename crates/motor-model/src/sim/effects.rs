@@ -202,7 +202,11 @@ impl<'a> SpecArgs<'a> {
             })?;
             let value: f64 = value.trim().parse().map_err(|_| ModelError::EffectSpec {
                 spec: spec.to_string(),
-                reason: format!("value of `{}` is not a number: `{}`", key.trim(), value.trim()),
+                reason: format!(
+                    "value of `{}` is not a number: `{}`",
+                    key.trim(),
+                    value.trim()
+                ),
             })?;
             pairs.push((key.trim(), value));
         }
@@ -226,7 +230,10 @@ impl<'a> SpecArgs<'a> {
             None => Ok(()),
             Some((key, _)) => Err(ModelError::EffectSpec {
                 spec: self.spec.to_string(),
-                reason: format!("unknown key `{key}`; this effect takes {}", known.join(", ")),
+                reason: format!(
+                    "unknown key `{key}`; this effect takes {}",
+                    known.join(", ")
+                ),
             }),
         }
     }
@@ -317,10 +324,7 @@ impl FromStr for Effect {
             "brush_drop" => {
                 let e = BrushDrop {
                     drop_v: non_negative("brush_drop vb", args.required("vb", "drop in V")?)?,
-                    knee_current_a: positive(
-                        "brush_drop knee",
-                        args.take("knee").unwrap_or(0.05),
-                    )?,
+                    knee_current_a: positive("brush_drop knee", args.take("knee").unwrap_or(0.05))?,
                 };
                 args.finish(&["vb", "knee"])?;
                 Effect::BrushDrop(e)
@@ -349,7 +353,10 @@ impl FromStr for Effect {
             other => {
                 return Err(ModelError::EffectSpec {
                     spec: spec.to_string(),
-                    reason: format!("unknown effect `{other}`; known: {}", EFFECT_NAMES.join(", ")),
+                    reason: format!(
+                        "unknown effect `{other}`; known: {}",
+                        EFFECT_NAMES.join(", ")
+                    ),
                 })
             }
         };

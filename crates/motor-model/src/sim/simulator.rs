@@ -142,11 +142,13 @@ impl Simulator {
             trace.t.push(t_i);
             trace.voltage.push(self.input.volts_at(t_i));
             trace.armature_current.push(x[I_IDX]);
-            trace.current.push(if self.effects.current_sensor_lag.is_some() {
-                x[IF_IDX]
-            } else {
-                x[I_IDX]
-            });
+            trace
+                .current
+                .push(if self.effects.current_sensor_lag.is_some() {
+                    x[IF_IDX]
+                } else {
+                    x[I_IDX]
+                });
             trace.speed.push(x[W_IDX]);
             trace.position.push(x[TH_IDX]);
             trace.stuck.push(mode == Mode::Stuck);
@@ -270,9 +272,9 @@ impl Simulator {
         let e = &self.effects;
         let i = x[I_IDX];
         let w = x[W_IDX];
-        let r = e.thermal_drift.map_or(p.r_ohm, |th| {
-            p.r_ohm * (1.0 + th.alpha_per_k * x[DT_IDX])
-        });
+        let r = e
+            .thermal_drift
+            .map_or(p.r_ohm, |th| p.r_ohm * (1.0 + th.alpha_per_k * x[DT_IDX]));
         let l = e.inductance_saturation.map_or(p.l_henry, |s| {
             let u = i / s.saturation_current_a;
             p.l_henry * (s.min_ratio + (1.0 - s.min_ratio) / (1.0 + u * u))
@@ -287,7 +289,9 @@ impl Simulator {
                     let u = w / s.stribeck_speed_rad_s;
                     p.ts_nm + (s.static_torque_nm - p.ts_nm) * (-u * u).exp()
                 });
-                let drag = e.quadratic_drag.map_or(0.0, |q| q.c_nms2_per_rad2 * w * w.abs());
+                let drag = e
+                    .quadratic_drag
+                    .map_or(0.0, |q| q.c_nms2_per_rad2 * w * w.abs());
                 let torque = p.k_nm_per_a * i
                     - p.f_nms_per_rad * w
                     - d * coulomb
@@ -326,9 +330,7 @@ fn fastest_time_constant(p: &MotorParams, e: &Effects) -> f64 {
     let l_min = e
         .inductance_saturation
         .map_or(p.l_henry, |s| p.l_henry * s.min_ratio);
-    let r_brush = e
-        .brush_drop
-        .map_or(0.0, |b| b.drop_v / b.knee_current_a);
+    let r_brush = e.brush_drop.map_or(0.0, |b| b.drop_v / b.knee_current_a);
     fastest_rate = fastest_rate.max((p.r_ohm + r_brush) / l_min);
     if let Some(lag) = e.current_sensor_lag {
         fastest_rate = fastest_rate.max(1.0 / lag.tau_f_s);

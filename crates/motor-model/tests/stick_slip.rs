@@ -1,0 +1,131 @@
+//! Appendix D: E(t) = 0.1 sin(πt/10) V on the paper's motor shows stick-slip.
+
+use motor_model::{Effects, Input, MotorParams, Simulator, Trace};
+
+const AMPLITUDE_V: f64 = 0.1;
+const FREQUENCY_HZ: f64 = 0.05; // πt/10 = 2π·0.05·t
+const RATE_HZ: f64 = 1000.0;
+
+fn appendix_d() -> Trace {
+    let input = Input::sine(AMPLITUDE_V, FREQUENCY_HZ).unwrap();
+    Simulator::new(MotorParams::paper(), Effects::none(), input)
+        .unwrap()
+        .run(60.0, RATE_HZ)
+        .unwrap()
+}
+
+/// Maximal runs of equal `stuck` flags: (first index, last index, stuck).
+fn runs(stuck: &[bool]) -> Vec<(usize, usize, bool)> {
+    let mut out: Vec<(usize, usize, bool)> = Vec::new();
+    for (i, &s) in stuck.iter().enumerate() {
+        match out.last_mut() {
+            Some(run) if run.2 == s => run.1 = i,
+            _ => out.push((i, i, s)),
+        }
+    }
+    out
+}
+
+/// Current while stuck, from (t_s, i_s), solving L dI/dt = A sin(ωt) − R I exactly.
+fn stuck_current(p: &MotorParams, t_s: f64, i_s: f64, t: f64) -> f64 {
+    let w = std::f64::consts::TAU * FREQUENCY_HZ;
+    let (r, l) = (p.r_ohm, p.l_henry);
+    let particular = |t: f64| {
+        AMPLITUDE_V / (r * r + (w * l).powi(2)) * (r * (w * t).sin() - w * l * (w * t).cos())
+    };
+    particular(t) + (i_s - particular(t_s)) * (-(t - t_s) * r / l).exp()
+}
+
+#[test]
+fn speed_is_exactly_zero_while_stuck_and_the_motor_moves_in_between() {
+    let trace = appendix_d();
+    let mut stuck_samples = 0;
+    for (i, &s) in trace.stuck.iter().enumerate() {
+        if s {
+            stuck_samples += 1;
+            assert_eq!(
+                trace.speed[i], 0.0,
+                "speed at t = {} while stuck",
+                trace.t[i]
+            );
+        }
+    }
+    let moving = trace.stuck.len() - stuck_samples;
+    assert!(
+        stuck_samples > 1000 && moving > 1000,
+        "{stuck_samples} stuck, {moving} moving"
+    );
+}
+
+#[test]
+fn motor_sticks_again_after_each_reversal() {
+    let trace = appendix_d();
+    let moving_runs: Vec<(usize, usize)> = runs(&trace.stuck)
+        .into_iter()
+        .filter(|r| !r.2)
+        .map(|r| (r.0, r.1))
+        .collect();
+    // One moving interval per half period of the 20 s sine over 60 s: 6.
+    assert_eq!(moving_runs.len(), 6, "moving intervals: {moving_runs:?}");
+    // Directions alternate: each reversal of E passes through a stuck interval.
+    let dirs: Vec<f64> = moving_runs
+        .iter()
+        .map(|&(a, b)| trace.speed[(a + b) / 2].signum())
+        .collect();
+    for pair in dirs.windows(2) {
+        assert_eq!(pair[0], -pair[1], "directions {dirs:?}");
+    }
+    // Speed never changes sign inside a moving interval.
+    for &(a, b) in &moving_runs {
+        let d = trace.speed[(a + b) / 2].signum();
+        assert!(trace.speed[a..=b].iter().all(|w| w * d >= 0.0));
+    }
+}
+
+/// The stuck intervals end exactly where the analytic breakaway condition |k I| > Ts first
+/// holds for the standstill current of Eq. (1) under the sine input: within one sample.
+#[test]
+fn stuck_intervals_match_the_analytic_breakaway_condition() {
+    let p = MotorParams::paper();
+    let trace = appendix_d();
+    let dt = 1.0 / RATE_HZ;
+    let mut checked = 0;
+    for (first, last, stuck) in runs(&trace.stuck) {
+        if !stuck || last + 1 >= trace.t.len() {
+            continue;
+        }
+        // Every stuck sample satisfies the holding condition |k I| ≤ Ts.
+        for i in first..=last {
+            assert!(p.k_nm_per_a * trace.current[i].abs() <= p.ts_nm * (1.0 + 1e-12));
+        }
+        // Analytic breakaway from the first stuck sample on, by bisection on a 1 ms scan.
+        let (t_s, i_s) = (trace.t[first], trace.current[first]);
+        let holds = |t: f64| p.k_nm_per_a * stuck_current(&p, t_s, i_s, t).abs() <= p.ts_nm;
+        let mut t = t_s;
+        while holds(t + dt) {
+            t += dt;
+        }
+        let (mut lo, mut hi) = (t, t + dt);
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if holds(mid) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let t_break = hi;
+        // The simulator's last stuck sample is before t_break and its next sample after it.
+        assert!(
+            trace.t[last] <= t_break + 1e-9 && t_break <= trace.t[last + 1] + 1e-9,
+            "analytic breakaway at {t_break} s, simulator between {} and {} s",
+            trace.t[last],
+            trace.t[last + 1]
+        );
+        checked += 1;
+    }
+    assert!(
+        checked >= 5,
+        "only {checked} stuck intervals ended inside the record"
+    );
+}
