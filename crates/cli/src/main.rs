@@ -1,1 +1,53 @@
-fn main() {}
+//! `motorid`: identify DC servomotor parameters; simulate, acquire, diagnose.
+//!
+//! `main` is glue: parse the command line, validate it into typed settings, run, and map the
+//! outcome to an exit code (0 success, 2 bad input, 1 anything else).
+
+mod args;
+mod commands;
+mod paper_values;
+mod record_csv;
+mod settings;
+
+use std::process::ExitCode;
+
+use clap::Parser;
+
+use args::{Cli, Command};
+
+/// Exit code for input the user must fix (bad options, unreadable or invalid files).
+const EXIT_BAD_INPUT: u8 = 2;
+/// Exit code for any other failure (I/O while writing, internal errors).
+const EXIT_FAILURE: u8 = 1;
+
+/// Marks an error as the user's input to fix, for the exit code.
+#[derive(Debug)]
+pub struct BadInput(pub String);
+
+impl std::fmt::Display for BadInput {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for BadInput {}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let outcome = match cli.command {
+        Command::Model(a) => commands::model::run(&a),
+        Command::Simulate(a) => commands::simulate::run(&a),
+        Command::Demo(a) => commands::demo::run(&a),
+    };
+    match outcome {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            if err.chain().any(|e| e.is::<BadInput>()) {
+                ExitCode::from(EXIT_BAD_INPUT)
+            } else {
+                ExitCode::from(EXIT_FAILURE)
+            }
+        }
+    }
+}

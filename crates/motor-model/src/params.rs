@@ -7,6 +7,7 @@ use crate::error::ModelError;
 /// Construct with [`MotorParams::new`], which refuses non-finite and non-positive values;
 /// the fields are public for reading.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct MotorParams {
     /// Armature resistance R [Ω].
     #[serde(rename = "R")]

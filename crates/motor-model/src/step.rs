@@ -22,7 +22,9 @@
 
 use serde::Serialize;
 
+use crate::error::{non_negative, positive, ModelError};
 use crate::params::MotorParams;
+use crate::sim::simulator::{Trace, MAX_SAMPLES};
 use crate::steady::{breakaway_time, standstill_current, steady_state};
 
 /// Samples between exact re-evaluations of the grid recurrence (bounds rounding drift to
@@ -263,5 +265,44 @@ impl StepResponse {
                 *slot = s.current_a;
             }
         });
+    }
+
+    /// A record of this step applied at `at_s` [s] (0 V before), sampled at `rate_hz` [Hz]
+    /// from `t = 0` to `duration_s` [s]: the analytic counterpart of [`crate::Simulator::run`].
+    pub fn trace(&self, at_s: f64, duration_s: f64, rate_hz: f64) -> Result<Trace, ModelError> {
+        let at_s = non_negative("step instant", at_s)?;
+        let duration_s = positive("duration", duration_s)?;
+        let rate_hz = positive("sample rate", rate_hz)?;
+        let n_f = (duration_s * rate_hz).floor() + 1.0;
+        if n_f > MAX_SAMPLES as f64 {
+            return Err(ModelError::InvalidSetting {
+                name: "duration × rate".into(),
+                value: n_f,
+                expected: "at most 10,000,000 samples: shorten the record or lower the rate",
+            });
+        }
+        let n = n_f as usize;
+        let dt = 1.0 / rate_hz;
+        let t: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
+        let before = t.iter().take_while(|&&ti| ti < at_s).count();
+        let mut states = vec![MotorState::default(); n];
+        if let Some(after) = states.get_mut(before..) {
+            let t_first = t.get(before).map_or(0.0, |&ti| ti - at_s);
+            self.fill(t_first, dt, after);
+        }
+        let volts = self.dir * self.e_abs;
+        let t0 = self.t0.unwrap_or(f64::INFINITY);
+        Ok(Trace {
+            voltage: t
+                .iter()
+                .map(|&ti| if ti >= at_s { volts } else { 0.0 })
+                .collect(),
+            current: states.iter().map(|s| s.current_a).collect(),
+            armature_current: states.iter().map(|s| s.current_a).collect(),
+            speed: states.iter().map(|s| s.speed_rad_s).collect(),
+            position: states.iter().map(|s| s.position_rad).collect(),
+            stuck: t.iter().map(|&ti| ti - at_s <= t0).collect(),
+            t,
+        })
     }
 }

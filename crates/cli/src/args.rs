@@ -1,0 +1,148 @@
+//! Command-line syntax. Only this module and `main` know clap.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+
+/// Identify the parameters of a DC servomotor and its load from step responses, simulate
+/// it exactly, and find where a model and a measurement disagree.
+#[derive(Debug, Parser)]
+#[command(name = "motorid", version, about)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Print a motor's derived constants, Eqs. (16)-(25): KE, Ks, wn, zeta, sigma, wa, ...
+    Model(ModelArgs),
+    /// Simulate a motor (exact analytic step or stick-slip ODE with effects) to a record CSV.
+    Simulate(SimulateArgs),
+    /// Run the paper's example end to end and compare with its printed tables.
+    Demo(DemoArgs),
+}
+
+/// Which motor: `paper` (the paper's Sec. 4.1 motor) or a JSON file with keys R, L, k, f, J,
+/// Ts in SI units.
+#[derive(Debug, Args)]
+pub struct MotorArg {
+    /// `paper` or FILE.json with {"R": ohm, "L": H, "k": N·m/A, "f": N·m·s/rad, "J": kg·m², "Ts": N·m}
+    #[arg(long, default_value = "paper", value_name = "paper|FILE.json")]
+    pub motor: String,
+}
+
+#[derive(Debug, Args)]
+pub struct ModelArgs {
+    #[command(flatten)]
+    pub motor: MotorArg,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SolverArg {
+    /// Exact closed-form step response (steps without effects only).
+    Analytic,
+    /// Stick-slip RK4 simulation (any waveform, effects).
+    Ode,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SpeedFromArg {
+    /// Tachometer: the true speed through the analog channel (noise, ADC).
+    Tacho,
+    /// Central difference of the (quantised) encoder angle.
+    Encoder,
+    /// No speed column.
+    None,
+}
+
+#[derive(Debug, Args)]
+pub struct SimulateArgs {
+    #[command(flatten)]
+    pub motor: MotorArg,
+    /// Step voltage [V] (either sign).
+    #[arg(
+        long,
+        value_name = "VOLTS",
+        allow_hyphen_values = true,
+        conflicts_with = "sine"
+    )]
+    pub voltage: Option<f64>,
+    /// Sine input AMP,FREQ: amplitude [V] and frequency [Hz] (Appendix D: 0.1,0.05).
+    #[arg(long, value_name = "AMP,FREQ", allow_hyphen_values = true)]
+    pub sine: Option<String>,
+    /// Instant of the step [s]; samples before it are pre-trigger samples at 0 V.
+    #[arg(
+        long,
+        default_value_t = 0.0,
+        value_name = "S",
+        allow_hyphen_values = true
+    )]
+    pub step_at: f64,
+    /// Record length [s].
+    #[arg(
+        long,
+        default_value_t = 50.0,
+        value_name = "S",
+        allow_hyphen_values = true
+    )]
+    pub duration: f64,
+    /// Sample rate [Hz].
+    #[arg(
+        long,
+        default_value_t = 1000.0,
+        value_name = "HZ",
+        allow_hyphen_values = true
+    )]
+    pub rate: f64,
+    /// Solver: `analytic` for a nominal step, `ode` otherwise (default: analytic when it applies).
+    #[arg(long, value_enum)]
+    pub solver: Option<SolverArg>,
+    /// Unmodelled effect NAME:key=value,... (repeatable), e.g. cogging_torque:amp=0.01,n=6.
+    #[arg(long = "effect", value_name = "NAME:KEY=VALUE,...")]
+    pub effects: Vec<String>,
+    #[command(flatten)]
+    pub measurement: MeasurementArgs,
+    /// Output CSV (record format of SPEC section 4); `-` or absent: standard output.
+    #[arg(short = 'o', long = "output", value_name = "FILE.csv")]
+    pub output: Option<PathBuf>,
+}
+
+/// The measurement chain: how the logger sees the plant.
+#[derive(Debug, Args)]
+pub struct MeasurementArgs {
+    /// ADC resolution [bits] for the analog channels (the paper's logger: 10); none = exact.
+    #[arg(long, value_name = "BITS")]
+    pub adc_bits: Option<u8>,
+    /// Voltage channel range LO,HI [V] mapped onto the ADC (default: the signal ±20 %).
+    #[arg(long, value_name = "LO,HI", allow_hyphen_values = true)]
+    pub range_voltage: Option<String>,
+    /// Current channel range LO,HI [A].
+    #[arg(long, value_name = "LO,HI", allow_hyphen_values = true)]
+    pub range_current: Option<String>,
+    /// Tachometer channel range LO,HI [rad/s].
+    #[arg(long, value_name = "LO,HI", allow_hyphen_values = true)]
+    pub range_speed: Option<String>,
+    /// White noise on every analog channel, standard deviation in ADC LSBs (needs --adc-bits).
+    #[arg(long, value_name = "LSB", allow_hyphen_values = true)]
+    pub noise_lsb: Option<f64>,
+    /// Encoder counts per revolution after quadrature decoding; none = exact angle.
+    #[arg(long, value_name = "COUNTS")]
+    pub encoder_cpr: Option<u32>,
+    /// Source of the speed column.
+    #[arg(long, value_enum, default_value = "tacho")]
+    pub speed_from: SpeedFromArg,
+    /// Seed of the noise: the same seed gives the same record.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// Also write the two simulated records (40 V and 2.5 V) into this folder.
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+}

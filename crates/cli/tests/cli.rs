@@ -1,0 +1,325 @@
+//! End-to-end tests: they run the real `motorid` binary.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn motorid(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_motorid"))
+        .args(args)
+        .output()
+        .expect("the motorid binary runs")
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("motorid-cli-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Acceptance 2: `model --motor paper --json` reproduces Table 1 to the printed digits
+/// (ωa: 0.3881, the table's 0.3381 being a typo).
+#[test]
+fn model_json_reproduces_table_1() {
+    let out = motorid(&["model", "--motor", "paper", "--json"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
+    let expected = [
+        ("KE", 1.3333, 4),
+        ("Ks", 4.0, 4),
+        ("wn", 0.3536, 4),
+        ("zeta", 1.4849, 4),
+        ("sigma", 0.5250, 4),
+        ("wa", 0.3881, 4),
+        ("tau_m", 20.0, 4),
+        ("tau_e", 1.0, 4),
+        ("alpha", 4.9896, 4),
+        ("gamma", 0.9110, 4),
+        ("i0", 0.2, 4),
+    ];
+    for (key, printed, decimals) in expected {
+        let value = v[key]
+            .as_f64()
+            .unwrap_or_else(|| panic!("key {key} in {v}"));
+        assert_eq!(
+            format!("{value:.decimals$}"),
+            format!("{printed:.decimals$}"),
+            "{key}"
+        );
+    }
+}
+
+/// Reads the last data row of a record CSV as numbers.
+fn last_row(csv: &str) -> Vec<f64> {
+    let line = csv.lines().filter(|l| !l.starts_with('#')).last().unwrap();
+    line.split(',').map(|x| x.parse().unwrap()).collect()
+}
+
+/// Acceptance 2: simulated 40 V and 2.5 V steps reproduce Table 2 at t = 50 s, with both
+/// solvers, through the record file.
+#[test]
+fn simulate_reproduces_table_2_with_both_solvers() {
+    let dir = scratch("table2");
+    for solver in ["analytic", "ode"] {
+        for (volts, current, speed) in [("40", "53.57", "159.6"), ("2.5", "3.46", "9.748")] {
+            let path = dir.join(format!("{solver}-{volts}.csv"));
+            let out = motorid(&[
+                "simulate",
+                "--motor",
+                "paper",
+                "--voltage",
+                volts,
+                "--duration",
+                "50",
+                "--rate",
+                "1000",
+                "--solver",
+                solver,
+                "-o",
+                path.to_str().unwrap(),
+            ]);
+            assert!(out.status.success(), "{}", stderr(&out));
+            let text = std::fs::read_to_string(&path).unwrap();
+            assert!(text
+                .lines()
+                .any(|l| l == "t,voltage,current,speed,position"));
+            let row = last_row(&text);
+            assert_eq!(row[0], 50.0);
+            assert_eq!(
+                format!("{:.2}", row[2]),
+                current,
+                "{solver} {volts} V current"
+            );
+            let dec = speed.len() - speed.find('.').unwrap() - 1;
+            assert_eq!(
+                format!("{:.dec$}", row[3]),
+                speed,
+                "{solver} {volts} V speed"
+            );
+        }
+    }
+}
+
+#[test]
+fn simulate_sine_with_effect_and_logger_measurement() {
+    let out = motorid(&[
+        "simulate",
+        "--sine",
+        "0.1,0.05",
+        "--duration",
+        "30",
+        "--rate",
+        "100",
+        "--effect",
+        "cogging_torque:amp=0.005,n=6",
+        "--adc-bits",
+        "10",
+        "--noise-lsb",
+        "1",
+        "--encoder-cpr",
+        "2000",
+        "--speed-from",
+        "encoder",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = stdout(&out);
+    assert!(text.contains("# effects: cogging_torque:amp=0.005,n=6,phase=0"));
+    let rows: Vec<Vec<f64>> = text
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with('t'))
+        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 3001);
+    // Negative voltages occur (a sine) and the 10-bit voltage channel has at most 1024 levels.
+    assert!(rows.iter().any(|r| r[1] < 0.0));
+    let mut levels: Vec<i64> = rows.iter().map(|r| (r[1] * 1e9) as i64).collect();
+    levels.sort();
+    levels.dedup();
+    assert!(levels.len() <= 1024);
+}
+
+#[test]
+fn motor_json_file_is_read_and_checked() {
+    let dir = scratch("motor-json");
+    let good = dir.join("servo.json");
+    std::fs::write(
+        &good,
+        r#"{"R": 2.0, "L": 0.002, "k": 0.05, "f": 1e-5, "J": 2e-5, "Ts": 0.004}"#,
+    )
+    .unwrap();
+    let out = motorid(&["model", "--motor", good.to_str().unwrap(), "--json"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
+    assert!((v["tau_e"].as_f64().unwrap() - 0.001).abs() < 1e-15);
+}
+
+/// Bad input: a one-line error naming what is wrong, exit code 2, never a panic.
+#[test]
+fn bad_input_gives_one_line_errors_and_exit_code_2() {
+    let dir = scratch("bad");
+    let negative_r = dir.join("negative_r.json");
+    std::fs::write(
+        &negative_r,
+        r#"{"R": -1, "L": 1, "k": 1, "f": 1, "J": 1, "Ts": 0}"#,
+    )
+    .unwrap();
+    let missing_key = dir.join("missing.json");
+    std::fs::write(&missing_key, r#"{"R": 1, "L": 1, "k": 1, "f": 1, "J": 1}"#).unwrap();
+    let unknown_key = dir.join("unknown.json");
+    std::fs::write(
+        &unknown_key,
+        r#"{"R": 1, "L": 1, "k": 1, "f": 1, "J": 1, "Ts": 0, "Rr": 2}"#,
+    )
+    .unwrap();
+    let not_json = dir.join("garbage.json");
+    std::fs::write(&not_json, "R = 1\n").unwrap();
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            vec!["model", "--motor", negative_r.to_str().unwrap()],
+            "R = -1: must be greater than zero",
+        ),
+        (
+            vec!["model", "--motor", missing_key.to_str().unwrap()],
+            "missing field `Ts`",
+        ),
+        (
+            vec!["model", "--motor", unknown_key.to_str().unwrap()],
+            "unknown field `Rr`",
+        ),
+        (
+            vec!["model", "--motor", not_json.to_str().unwrap()],
+            "line 1",
+        ),
+        (
+            vec!["model", "--motor", "/no/such/motor.json"],
+            "cannot read the file",
+        ),
+        (vec!["simulate", "--duration", "1"], "give the input"),
+        (
+            vec!["simulate", "--voltage", "1", "--duration", "-1"],
+            "duration = -1",
+        ),
+        (
+            vec!["simulate", "--voltage", "1", "--rate", "0"],
+            "sample rate = 0",
+        ),
+        (
+            vec![
+                "simulate",
+                "--voltage",
+                "1",
+                "--duration",
+                "1e9",
+                "--rate",
+                "1e6",
+            ],
+            "at most 10,000,000 samples",
+        ),
+        (vec!["simulate", "--sine", "0.1"], "two numbers"),
+        (vec!["simulate", "--sine", "0.1,-2"], "sine frequency = -2"),
+        (
+            vec!["simulate", "--voltage", "1", "--effect", "warp_drive:x=1"],
+            "unknown effect",
+        ),
+        (
+            vec![
+                "simulate",
+                "--voltage",
+                "1",
+                "--effect",
+                "stribeck_friction:tst=0.001",
+            ],
+            "at least the motor's Coulomb torque",
+        ),
+        (
+            vec!["simulate", "--voltage", "1", "--noise-lsb", "1"],
+            "needs --adc-bits",
+        ),
+        (
+            vec!["simulate", "--voltage", "1", "--adc-bits", "40"],
+            "1 to 24 bits",
+        ),
+        (
+            vec![
+                "simulate",
+                "--voltage",
+                "1",
+                "--range-current",
+                "5,1",
+                "--adc-bits",
+                "10",
+            ],
+            "lo < hi",
+        ),
+        (vec!["simulate", "--voltage", "nan"], "voltage"),
+    ];
+    for (args, needle) in cases {
+        let out = motorid(&args);
+        let err = stderr(&out);
+        assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(
+            err.contains(needle),
+            "{args:?}: `{err}` should mention `{needle}`"
+        );
+        assert_eq!(
+            err.trim_end().lines().count(),
+            1,
+            "{args:?}: not one line: {err}"
+        );
+    }
+}
+
+#[test]
+fn output_is_written_atomically_and_unwritable_paths_fail_cleanly() {
+    let out = motorid(&[
+        "simulate",
+        "--voltage",
+        "1",
+        "--duration",
+        "0.01",
+        "-o",
+        "/no/such/dir/rec.csv",
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("cannot write /no/such/dir/rec.csv"));
+    let dir = scratch("atomic");
+    let path = dir.join("rec.csv");
+    let out = motorid(&[
+        "simulate",
+        "--voltage",
+        "1",
+        "--duration",
+        "0.01",
+        "-o",
+        path.to_str().unwrap(),
+    ]);
+    assert!(out.status.success());
+    let leftovers: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(leftovers.len(), 1, "{leftovers:?}");
+}
+
+#[test]
+fn demo_prints_tables_1_and_2_beside_the_paper() {
+    let out = motorid(&["demo"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = stdout(&out);
+    for line in [
+        "KE           1.3333 = 1.3333",
+        "Im      53.57 = 53.57",
+        "Wb      9.748 = 9.748",
+    ] {
+        assert!(text.contains(line), "missing `{line}` in\n{text}");
+    }
+    assert!(text.contains("0.3881 ≠ 0.3381"));
+}
