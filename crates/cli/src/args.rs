@@ -18,7 +18,7 @@ pub enum Command {
     /// Print a motor's derived constants, Eqs. (16)-(25): KE, Ks, wn, zeta, sigma, wa, ...
     Model(ModelArgs),
     /// Simulate a motor (exact analytic step or stick-slip ODE with effects) to a record CSV.
-    Simulate(SimulateArgs),
+    Simulate(Box<SimulateArgs>),
     /// Run the paper's example end to end and compare with its printed tables.
     Demo(DemoArgs),
 }

@@ -58,7 +58,7 @@ fn model_json_reproduces_table_1() {
 
 /// Reads the last data row of a record CSV as numbers.
 fn last_row(csv: &str) -> Vec<f64> {
-    let line = csv.lines().filter(|l| !l.starts_with('#')).last().unwrap();
+    let line = csv.lines().rfind(|l| !l.starts_with('#')).unwrap();
     line.split(',').map(|x| x.parse().unwrap()).collect()
 }
 
