@@ -3,6 +3,9 @@
 //! `main` is glue: parse the command line, validate it into typed settings, run, and map the
 //! outcome to an exit code (0 success, 2 bad input, 1 anything else).
 
+// Doc comments of `args` are the `--help` text, where units read naturally as `[V]`, `[s]`.
+#![allow(rustdoc::broken_intra_doc_links)]
+
 mod args;
 mod commands;
 mod paper_values;

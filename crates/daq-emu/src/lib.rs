@@ -10,5 +10,5 @@
 
 pub use daq_protocol::{ADC_BITS, BAUD, ENCODER_BITS};
 
-/// RAM of the PIC 16F877 [bytes]: the budget of the firmware core's state.
+/// RAM of the PIC 16F877, in bytes: the budget of the firmware core's state.
 pub const PIC_RAM_BYTES: usize = 368;

@@ -13,5 +13,5 @@
 pub const ADC_BITS: u8 = 10;
 /// Bits of the encoder counter (MC4040 ripple counter; wraps).
 pub const ENCODER_BITS: u8 = 12;
-/// Serial line rate of the logger [baud] (the paper prints 115250: a typo for 115200).
+/// Serial line rate of the logger, in baud (the paper prints 115250: a typo for 115200).
 pub const BAUD: u32 = 115_200;

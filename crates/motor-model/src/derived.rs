@@ -21,31 +21,31 @@ pub enum Regime {
 /// forms (24), (25) or (B.10) of the regime. At ζ = 1 they are infinite and reported as `None`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Derived {
-    /// Eq. (16) voltage gain `KE = f/(Rf + k²)` [A/V].
+    /// Eq. (16) voltage gain `KE = f/(Rf + k²)` \[A/V\].
     #[serde(rename = "KE")]
     pub k_e: f64,
-    /// Eq. (17) torque gain `Ks = k/(Rf + k²)` [A/(N·m)].
+    /// Eq. (17) torque gain `Ks = k/(Rf + k²)` \[A/(N·m)\].
     #[serde(rename = "Ks")]
     pub k_s: f64,
-    /// Eq. (18) electrical time constant `τe = L/R` [s].
+    /// Eq. (18) electrical time constant `τe = L/R` \[s\].
     pub tau_e: f64,
-    /// Eq. (19) mechanical time constant `τm = J/f` [s].
+    /// Eq. (19) mechanical time constant `τm = J/f` \[s\].
     pub tau_m: f64,
-    /// Eq. (20) natural pulsation `ωn = √((Rf + k²)/(LJ))` [rad/s].
+    /// Eq. (20) natural pulsation `ωn = √((Rf + k²)/(LJ))` \[rad/s\].
     #[serde(rename = "wn")]
     pub omega_n: f64,
-    /// Eq. (21) damping ratio `ζ = ωn (Lf + JR) / (2(Rf + k²))` [-].
+    /// Eq. (21) damping ratio `ζ = ωn (Lf + JR) / (2(Rf + k²))` \[-\].
     pub zeta: f64,
-    /// Eq. (23) attenuation `σ = ζ ωn` [1/s].
+    /// Eq. (23) attenuation `σ = ζ ωn` \[1/s\].
     pub sigma: f64,
-    /// Eq. (22) / (B.10) damped pulsation `ωa = ωn √|ζ² − 1|` [rad/s] (0 at ζ = 1).
+    /// Eq. (22) / (B.10) damped pulsation `ωa = ωn √|ζ² − 1|` \[rad/s\] (0 at ζ = 1).
     #[serde(rename = "wa")]
     pub omega_a: f64,
-    /// Eq. (24) / (B.10) constant α [-]; `None` at ζ = 1 or where the real form does not exist.
+    /// Eq. (24) / (B.10) constant α \[-\]; `None` at ζ = 1 or where the real form does not exist.
     pub alpha: Option<f64>,
-    /// Eq. (25) / (B.10) constant `γ = 1/√|ζ² − 1|` [-]; `None` at ζ = 1.
+    /// Eq. (25) / (B.10) constant `γ = 1/√|ζ² − 1|` \[-\]; `None` at ζ = 1.
     pub gamma: Option<f64>,
-    /// Eq. (26) breakaway current `i0 = Ts/k` [A].
+    /// Eq. (26) breakaway current `i0 = Ts/k` \[A\].
     pub i0: f64,
     /// Which damping regime these constants describe.
     pub regime: Regime,
@@ -110,7 +110,7 @@ impl Derived {
     }
 }
 
-/// `q = σ² − ωn² = ωn²(ζ² − 1)` [1/s²], signed: positive when overdamped.
+/// `q = σ² − ωn² = ωn²(ζ² − 1)` \[1/s²\], signed: positive when overdamped.
 ///
 /// Written as `(R/L − f/J)²/4 − k²/(LJ)` so that no large terms cancel near ζ = 1.
 pub(crate) fn signed_damped_pulsation_sq(p: &MotorParams) -> f64 {

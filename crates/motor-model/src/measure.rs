@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{positive, ModelError};
 use crate::sim::simulator::Trace;
 
-/// Physical range [lo, hi] (SI units) mapped by a channel's signal conditioning onto the
+/// Physical range \[lo, hi\] (SI units) mapped by a channel's signal conditioning onto the
 /// ADC's 0–5 V input; values outside clip at the rails.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Range {
@@ -49,7 +49,7 @@ impl Range {
     }
 }
 
-/// An ADC of `bits` resolution [-] shared by all analog channels.
+/// An ADC of `bits` resolution \[-\] shared by all analog channels.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Adc {
     /// Resolution in bits (the PIC 16F877: 10).
@@ -102,11 +102,11 @@ pub enum SpeedSource {
 pub struct MeasurementModel {
     /// ADC resolution, or `None` for unquantised values.
     pub adc: Option<Adc>,
-    /// Conditioning ranges of voltage [V], current [A], tacho speed [rad/s]; `None` = chosen
+    /// Conditioning ranges of voltage \[V\], current \[A\], tacho speed \[rad/s\]; `None` = chosen
     /// from the signal with [`Range::covering`].
     pub ranges: [Option<Range>; 3],
-    /// Standard deviation of additive white noise on voltage [V], current [A] and tacho speed
-    /// [rad/s], before quantisation.
+    /// Standard deviation of additive white noise on voltage \[V\], current \[A\] and tacho speed
+    /// \[rad/s\], before quantisation.
     pub noise_std: [f64; 3],
     /// Encoder counts per revolution after quadrature decoding, or `None` for the exact angle.
     pub encoder_counts_per_rev: Option<u32>,
@@ -133,15 +133,15 @@ impl Default for MeasurementModel {
 /// A measured record in the units of SPEC section 4, ready to be written as CSV.
 #[derive(Debug, Clone, PartialEq, Default, Serialize)]
 pub struct Record {
-    /// Sample times [s], strictly increasing.
+    /// Sample times \[s\], strictly increasing.
     pub t: Vec<f64>,
-    /// Armature voltage [V].
+    /// Armature voltage \[V\].
     pub voltage: Vec<f64>,
-    /// Armature current [A].
+    /// Armature current \[A\].
     pub current: Vec<f64>,
-    /// Speed [rad/s], if recorded.
+    /// Speed \[rad/s\], if recorded.
     pub speed: Option<Vec<f64>>,
-    /// Angle [rad], if recorded.
+    /// Angle \[rad\], if recorded.
     pub position: Option<Vec<f64>>,
     /// Samples of each analog channel (voltage, current, speed) that sat on an ADC rail.
     pub clipped: [usize; 3],
@@ -212,7 +212,7 @@ impl MeasurementModel {
     }
 }
 
-/// Derivative of `y` over `t` by central differences (one-sided at the ends) [unit of y / s].
+/// Derivative of `y` over `t` by central differences (one-sided at the ends) \[unit of y / s\].
 pub fn central_difference(t: &[f64], y: &[f64]) -> Vec<f64> {
     let n = t.len().min(y.len());
     (0..n)

@@ -6,26 +6,26 @@
 //! in `docs/errata.md` with its derivation; the tests in this crate show each printed form
 //! failing and each corrected one agreeing with the exact response.
 //!
-//! All times here are `τ = t − t0` [s], the time since breakaway (Appendix B convention),
+//! All times here are `τ = t − t0` \[s\], the time since breakaway (Appendix B convention),
 //! except for the approximations (32), (33), (C.8), which the paper writes in `t`.
 
 use crate::derived::{Derived, Regime};
 use crate::error::ModelError;
 use crate::params::MotorParams;
 
-/// The three components of the current after breakaway, Eq. (12): `I = I0 + ITs + IE` [A].
+/// The three components of the current after breakaway, Eq. (12): `I = I0 + ITs + IE` \[A\].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CurrentComponents {
-    /// Response to the initial current `Ts/k`, Eq. (13) / (B.11) / (B.14) [A].
+    /// Response to the initial current `Ts/k`, Eq. (13) / (B.11) / (B.14) \[A\].
     pub i_0: f64,
-    /// Response to the Coulomb torque, Eq. (14) / (B.12) / (B.15) [A].
+    /// Response to the Coulomb torque, Eq. (14) / (B.12) / (B.15) \[A\].
     pub i_ts: f64,
-    /// Response to the voltage step, Eq. (15) / (B.13) / (B.16) [A].
+    /// Response to the voltage step, Eq. (15) / (B.13) / (B.16) \[A\].
     pub i_e: f64,
 }
 
 impl CurrentComponents {
-    /// Eq. (12): the total current [A].
+    /// Eq. (12): the total current \[A\].
     pub fn total(&self) -> f64 {
         self.i_0 + self.i_ts + self.i_e
     }
@@ -61,7 +61,7 @@ fn overdamped_alpha(d: &Derived, formula: &'static str) -> Result<f64, ModelErro
     }
 }
 
-/// The current components (12)–(15) at `tau_s` [s] after breakaway of a step `e_volt` [V] ≥ 0,
+/// The current components (12)–(15) at `tau_s` \[s\] after breakaway of a step `e_volt` \[V\] ≥ 0,
 /// in the form of the motor's damping regime:
 ///
 /// - ζ > 1, Eqs. (13)–(15) as printed (valid where τm > τe — the usual servo; otherwise an
@@ -127,7 +127,7 @@ pub fn current_components(
     }
 }
 
-/// Eq. (C.4): the speed [rad/s] at `tau_s` [s] after breakaway of a step `e_volt` [V] ≥ 0,
+/// Eq. (C.4): the speed \[rad/s\] at `tau_s` \[s\] after breakaway of a step `e_volt` \[V\] ≥ 0,
 /// as printed (ζ > 1 only; the paper gives no other regime — use [`crate::StepResponse`]).
 pub fn speed_c4(p: &MotorParams, e_volt: f64, tau_s: f64) -> Result<f64, ModelError> {
     let d = Derived::new(p);
@@ -150,12 +150,12 @@ pub fn speed_c4(p: &MotorParams, e_volt: f64, tau_s: f64) -> Result<f64, ModelEr
 }
 
 /// Eq. (33): the normalised high-voltage current `Ī(t) = 1 + α e^{−σt} sinh(ωa t − sinh⁻¹(1/α))`
-/// [-] at `t_s` [s]; α [-], σ [1/s], ωa [rad/s]. The model the paper fits in Sec. 2.4.
+/// \[-\] at `t_s` \[s\]; α \[-\], σ \[1/s\], ωa \[rad/s\]. The model the paper fits in Sec. 2.4.
 pub fn normalized_current_33(alpha: f64, sigma: f64, omega_a: f64, t_s: f64) -> f64 {
     1.0 + alpha * (-sigma * t_s).exp() * (omega_a * t_s - (1.0 / alpha).asinh()).sinh()
 }
 
-/// Eq. (32): the high-voltage approximation `I ≈ IE(t) = KE E Ī(t)` [A] at `t_s` [s]
+/// Eq. (32): the high-voltage approximation `I ≈ IE(t) = KE E Ī(t)` \[A\] at `t_s` \[s\]
 /// after the step (friction and breakaway neglected; valid when (31) holds).
 pub fn high_voltage_current_32(p: &MotorParams, e_volt: f64, t_s: f64) -> Result<f64, ModelError> {
     let d = Derived::new(p);
@@ -163,19 +163,19 @@ pub fn high_voltage_current_32(p: &MotorParams, e_volt: f64, t_s: f64) -> Result
     Ok(d.k_e * e_volt * normalized_current_33(alpha, d.sigma, d.omega_a, t_s))
 }
 
-/// Eq. (31): the smallest step voltage [V] for which the approximation (32) errs by less than
+/// Eq. (31): the smallest step voltage \[V\] for which the approximation (32) errs by less than
 /// 5 %: `E > 20 Ts (R/k + k/f)`.
 pub fn high_voltage_threshold_31(p: &MotorParams) -> f64 {
     20.0 * p.ts_nm * (p.r_ohm / p.k_nm_per_a + p.k_nm_per_a / p.f_nms_per_rad)
 }
 
-/// Eq. (C.8): the normalised speed `Ω_EN(τ) = 1 − γ e^{−στ} sinh(ωa τ + sinh⁻¹(1/γ))` [-]
-/// at `tau_s` [s]; γ [-], σ [1/s], ωa [rad/s]. Depends on ωn and ζ only.
+/// Eq. (C.8): the normalised speed `Ω_EN(τ) = 1 − γ e^{−στ} sinh(ωa τ + sinh⁻¹(1/γ))` \[-\]
+/// at `tau_s` \[s\]; γ \[-\], σ \[1/s\], ωa \[rad/s\]. Depends on ωn and ζ only.
 pub fn normalized_speed_c8(gamma: f64, sigma: f64, omega_a: f64, tau_s: f64) -> f64 {
     1.0 - gamma * (-sigma * tau_s).exp() * (omega_a * tau_s + (1.0 / gamma).asinh()).sinh()
 }
 
-/// Eq. (C.6): the dominant-terms approximation of the speed [rad/s] at `tau_s` [s] after
+/// Eq. (C.6): the dominant-terms approximation of the speed \[rad/s\] at `tau_s` \[s\] after
 /// breakaway, `EKE k/f [C.8] − Ts (1 − k Ks)/f (1 − e^{−στ/4.45})` (the 4.45 is the paper's
 /// empirical constant).
 pub fn approximate_speed_c6(p: &MotorParams, e_volt: f64, tau_s: f64) -> Result<f64, ModelError> {

@@ -9,22 +9,22 @@ use crate::error::ModelError;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MotorParams {
-    /// Armature resistance R [Ω].
+    /// Armature resistance R \[Ω\].
     #[serde(rename = "R")]
     pub r_ohm: f64,
-    /// Armature inductance L [H].
+    /// Armature inductance L \[H\].
     #[serde(rename = "L")]
     pub l_henry: f64,
-    /// Torque constant = back-EMF constant k [N·m/A = V·s/rad].
+    /// Torque constant = back-EMF constant k \[N·m/A = V·s/rad\].
     #[serde(rename = "k")]
     pub k_nm_per_a: f64,
-    /// Viscous friction coefficient f of motor + load [N·m·s/rad].
+    /// Viscous friction coefficient f of motor + load \[N·m·s/rad\].
     #[serde(rename = "f")]
     pub f_nms_per_rad: f64,
-    /// Moment of inertia J of motor + load [kg·m²].
+    /// Moment of inertia J of motor + load \[kg·m²\].
     #[serde(rename = "J")]
     pub j_kgm2: f64,
-    /// Coulomb (dry) friction torque Ts [N·m], constant magnitude, opposing motion.
+    /// Coulomb (dry) friction torque Ts \[N·m\], constant magnitude, opposing motion.
     #[serde(rename = "Ts")]
     pub ts_nm: f64,
 }
@@ -100,7 +100,7 @@ impl MotorParams {
         Ok(())
     }
 
-    /// `R f + k²` [N·m·Ω·s/rad … = V·s·N·m/(A·rad)], the denominator shared by (4), (16), (17), (20).
+    /// `R f + k²` \[N·m·Ω·s/rad … = V·s·N·m/(A·rad)\], the denominator shared by (4), (16), (17), (20).
     pub fn rf_plus_k2(&self) -> f64 {
         self.r_ohm * self.f_nms_per_rad + self.k_nm_per_a * self.k_nm_per_a
     }

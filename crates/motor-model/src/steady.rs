@@ -6,15 +6,15 @@ use crate::params::MotorParams;
 /// Steady state of a voltage step, Eqs. (4) and (5).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct SteadyState {
-    /// Eq. (4) `Ωr = (E k − Ts R)/(R f + k²)` [rad/s]; 0 when the motor never breaks away.
+    /// Eq. (4) `Ωr = (E k − Ts R)/(R f + k²)` \[rad/s\]; 0 when the motor never breaks away.
     pub speed_rad_s: f64,
-    /// Eq. (5) `Ir = (E − k Ωr)/R` [A], computed as `KE E + Ks Ts` (49) to avoid cancellation.
+    /// Eq. (5) `Ir = (E − k Ωr)/R` \[A\], computed as `KE E + Ks Ts` (49) to avoid cancellation.
     pub current_a: f64,
     /// Whether the step breaks the Coulomb friction at all (`|E| > R Ts / k`).
     pub moving: bool,
 }
 
-/// Steady state reached by a constant armature voltage `e_volt` [V], either sign.
+/// Steady state reached by a constant armature voltage `e_volt` \[V\], either sign.
 ///
 /// When `|E| ≤ R Ts/k` the motor never breaks away: the current settles at `E/R` and the speed
 /// stays 0 (Eq. (1) holds for ever).
@@ -43,12 +43,12 @@ pub fn steady_state(p: &MotorParams, e_volt: f64) -> SteadyState {
     }
 }
 
-/// Current while the rotor is still at rest, Eq. (10): `I(t) = E/R (1 − e^(−t/τe))` [A].
+/// Current while the rotor is still at rest, Eq. (10): `I(t) = E/R (1 − e^(−t/τe))` \[A\].
 pub fn standstill_current(p: &MotorParams, e_volt: f64, t_s: f64) -> f64 {
     -e_volt / p.r_ohm * (-t_s * p.r_ohm / p.l_henry).exp_m1()
 }
 
-/// Breakaway instant of a step of `e_volt` [V], Eq. (11): `t0 = −τe ln(1 − R Ts/(k E))` [s].
+/// Breakaway instant of a step of `e_volt` \[V\], Eq. (11): `t0 = −τe ln(1 − R Ts/(k E))` \[s\].
 ///
 /// `None` when `|E| ≤ R Ts/k`: the torque `k I` never exceeds `Ts` and the motor stays at rest.
 pub fn breakaway_time(p: &MotorParams, e_volt: f64) -> Option<f64> {
@@ -60,12 +60,12 @@ pub fn breakaway_time(p: &MotorParams, e_volt: f64) -> Option<f64> {
     (ratio < 1.0).then(|| -(p.l_henry / p.r_ohm) * (-ratio).ln_1p())
 }
 
-/// Apparent resistance increase of Eqs. (6)–(8): `ΔR = E/Ir − R = a − b/Ir` [Ω].
+/// Apparent resistance increase of Eqs. (6)–(8): `ΔR = E/Ir − R = a − b/Ir` \[Ω\].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct ApparentResistance {
-    /// `a = k²/f` [Ω], Eq. (7).
+    /// `a = k²/f` \[Ω\], Eq. (7).
     pub a_ohm: f64,
-    /// `b = Ts k / f` [Ω·A], Eq. (7).
+    /// `b = Ts k / f` \[Ω·A\], Eq. (7).
     pub b_ohm_a: f64,
 }
 
@@ -78,12 +78,12 @@ impl ApparentResistance {
         }
     }
 
-    /// `ΔR = a − b/Ir` [Ω] at steady current `ir_a` [A], Eq. (8).
+    /// `ΔR = a − b/Ir` \[Ω\] at steady current `ir_a` \[A\], Eq. (8).
     pub fn delta_r(&self, ir_a: f64) -> f64 {
         self.a_ohm - self.b_ohm_a / ir_a
     }
 
-    /// Eq. (9): the Coulomb torque `Ts = k b / a` [N·m] given the torque constant `k`.
+    /// Eq. (9): the Coulomb torque `Ts = k b / a` \[N·m\] given the torque constant `k`.
     pub fn coulomb_torque(&self, k_nm_per_a: f64) -> Result<f64, ModelError> {
         if self.a_ohm == 0.0 || !self.a_ohm.is_finite() {
             return Err(ModelError::OutOfDomain {

@@ -41,15 +41,15 @@ const SERIES_LIMIT: f64 = 1e-2;
 /// One instant of a motor's response.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
 pub struct MotorState {
-    /// Armature current I [A].
+    /// Armature current I \[A\].
     pub current_a: f64,
-    /// Shaft speed Ω [rad/s].
+    /// Shaft speed Ω \[rad/s\].
     pub speed_rad_s: f64,
-    /// Shaft angle θ [rad], 0 at the step instant.
+    /// Shaft angle θ \[rad\], 0 at the step instant.
     pub position_rad: f64,
 }
 
-/// `(C(τ), S(τ))` of the module docs for signed `q` [1/s²] and `τ` [s].
+/// `(C(τ), S(τ))` of the module docs for signed `q` \[1/s²\] and `τ` \[s\].
 pub(crate) fn cosh_sinhc(q: f64, tau: f64) -> (f64, f64) {
     let u = q * tau * tau;
     if u.abs() < SERIES_LIMIT {
@@ -117,7 +117,7 @@ pub struct StepResponse {
 }
 
 impl StepResponse {
-    /// Prepares the response of `params` to a step of `e_volt` [V].
+    /// Prepares the response of `params` to a step of `e_volt` \[V\].
     pub fn new(params: &MotorParams, e_volt: f64) -> Self {
         let p = *params;
         let dir = if e_volt < 0.0 { -1.0 } else { 1.0 };
@@ -164,12 +164,12 @@ impl StepResponse {
         }
     }
 
-    /// Breakaway instant t0 [s] of Eq. (11), `None` if the motor never moves.
+    /// Breakaway instant t0 \[s\] of Eq. (11), `None` if the motor never moves.
     pub fn breakaway_time(&self) -> Option<f64> {
         self.t0
     }
 
-    /// Steady current Ir [A] and speed Ωr [rad/s] of Eqs. (4), (5), signed like `E`.
+    /// Steady current Ir \[A\] and speed Ωr \[rad/s\] of Eqs. (4), (5), signed like `E`.
     pub fn steady(&self) -> (f64, f64) {
         if self.t0.is_some() {
             (self.dir * self.i_r, self.dir * self.omega_r)
@@ -197,7 +197,7 @@ impl StepResponse {
         }
     }
 
-    /// Current, speed and angle at time `t_s` [s] after the step (0 for `t < 0`).
+    /// Current, speed and angle at time `t_s` \[s\] after the step (0 for `t < 0`).
     pub fn at(&self, t_s: f64) -> MotorState {
         match self.t0 {
             Some(t0) if t_s > t0 => {
@@ -247,7 +247,7 @@ impl StepResponse {
         }
     }
 
-    /// Fills `out[i]` with the state at `t_first + i·dt` [s]. No allocation.
+    /// Fills `out[i]` with the state at `t_first + i·dt` \[s\]. No allocation.
     pub fn fill(&self, t_first: f64, dt: f64, out: &mut [MotorState]) {
         let n = out.len();
         self.walk(t_first, dt, n, |i, s| {
@@ -257,7 +257,7 @@ impl StepResponse {
         });
     }
 
-    /// Fills `out[i]` with the current [A] at `t_first + i·dt` [s]. No allocation.
+    /// Fills `out[i]` with the current \[A\] at `t_first + i·dt` \[s\]. No allocation.
     pub fn fill_current(&self, t_first: f64, dt: f64, out: &mut [f64]) {
         let n = out.len();
         self.walk(t_first, dt, n, |i, s| {
@@ -267,8 +267,8 @@ impl StepResponse {
         });
     }
 
-    /// A record of this step applied at `at_s` [s] (0 V before), sampled at `rate_hz` [Hz]
-    /// from `t = 0` to `duration_s` [s]: the analytic counterpart of [`crate::Simulator::run`].
+    /// A record of this step applied at `at_s` \[s\] (0 V before), sampled at `rate_hz` \[Hz\]
+    /// from `t = 0` to `duration_s` \[s\]: the analytic counterpart of [`crate::Simulator::run`].
     pub fn trace(&self, at_s: f64, duration_s: f64, rate_hz: f64) -> Result<Trace, ModelError> {
         let at_s = non_negative("step instant", at_s)?;
         let duration_s = positive("duration", duration_s)?;

@@ -11,75 +11,75 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{finite, non_negative, positive, ModelError};
 
-/// Copper's temperature coefficient of resistance at 20 °C [1/K] (IEC 60028 annealed copper).
+/// Copper's temperature coefficient of resistance at 20 °C \[1/K\] (IEC 60028 annealed copper).
 pub const COPPER_ALPHA_PER_K: f64 = 0.00393;
 
 /// `stribeck_friction`: the dry friction falls from a static level `Tst > Ts` to `Ts` with speed,
-/// `T_c(Ω) = Ts + (Tst − Ts) exp(−(Ω/Ωs)²)` [N·m]; breakaway needs `|k I| > Tst`.
+/// `T_c(Ω) = Ts + (Tst − Ts) exp(−(Ω/Ωs)²)` \[N·m\]; breakaway needs `|k I| > Tst`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct StribeckFriction {
-    /// Static (breakaway) torque Tst [N·m], key `tst`; must exceed the motor's Ts.
+    /// Static (breakaway) torque Tst \[N·m\], key `tst`; must exceed the motor's Ts.
     pub static_torque_nm: f64,
-    /// Stribeck speed Ωs [rad/s], key `ws` (default 1).
+    /// Stribeck speed Ωs \[rad/s\], key `ws` (default 1).
     pub stribeck_speed_rad_s: f64,
 }
 
-/// `cogging_torque`: a load torque periodic in the angle, `T_cog(θ) = A sin(N θ + φ)` [N·m].
+/// `cogging_torque`: a load torque periodic in the angle, `T_cog(θ) = A sin(N θ + φ)` \[N·m\].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct CoggingTorque {
-    /// Amplitude A [N·m], key `amp`.
+    /// Amplitude A \[N·m\], key `amp`.
     pub amplitude_nm: f64,
-    /// Periods per revolution N [-], key `n` (default 6).
+    /// Periods per revolution N \[-\], key `n` (default 6).
     pub periods_per_rev: u32,
-    /// Phase φ [rad], key `phase` (default 0).
+    /// Phase φ \[rad\], key `phase` (default 0).
     pub phase_rad: f64,
 }
 
-/// `current_sensor_lag`: the current channel sees `I_f` with `τf dI_f/dt = I − I_f` [A]
+/// `current_sensor_lag`: the current channel sees `I_f` with `τf dI_f/dt = I − I_f` \[A\]
 /// (first-order low-pass of time constant τf); the plant itself is unchanged.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct CurrentSensorLag {
-    /// Filter time constant τf [s], key `tau`.
+    /// Filter time constant τf \[s\], key `tau`.
     pub tau_f_s: f64,
 }
 
 /// `thermal_drift`: `R = R0 (1 + α ΔT)`, with the winding temperature rise driven by the copper
-/// loss through a first-order thermal network, `Cth dΔT/dt = I² R − ΔT/Rth` [K].
+/// loss through a first-order thermal network, `Cth dΔT/dt = I² R − ΔT/Rth` \[K\].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ThermalDrift {
-    /// Thermal resistance winding→ambient Rth [K/W], key `rth`.
+    /// Thermal resistance winding→ambient Rth \[K/W\], key `rth`.
     pub thermal_resistance_k_per_w: f64,
-    /// Thermal capacity of the winding Cth [J/K], key `cth`.
+    /// Thermal capacity of the winding Cth \[J/K\], key `cth`.
     pub thermal_capacity_j_per_k: f64,
-    /// Temperature coefficient α [1/K], key `alpha` (default [`COPPER_ALPHA_PER_K`]).
+    /// Temperature coefficient α \[1/K\], key `alpha` (default [`COPPER_ALPHA_PER_K`]).
     pub alpha_per_k: f64,
 }
 
-/// `quadratic_drag`: an extra load torque `c Ω|Ω|` [N·m] (fan, fluid).
+/// `quadratic_drag`: an extra load torque `c Ω|Ω|` \[N·m\] (fan, fluid).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct QuadraticDrag {
-    /// Coefficient c [N·m·s²/rad²], key `c`.
+    /// Coefficient c \[N·m·s²/rad²\], key `c`.
     pub c_nms2_per_rad2: f64,
 }
 
-/// `brush_drop`: a voltage drop across the brushes, `Vb sign(I)` [V], regularised linearly
+/// `brush_drop`: a voltage drop across the brushes, `Vb sign(I)` \[V\], regularised linearly
 /// below a knee current (`Vb · clamp(I/I_knee, −1, 1)`: a brush film conducts ohmically at
 /// low current, and a true sign function would chatter).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct BrushDrop {
-    /// Drop Vb at full conduction [V], key `vb`.
+    /// Drop Vb at full conduction \[V\], key `vb`.
     pub drop_v: f64,
-    /// Knee current I_knee [A] below which the drop is proportional, key `knee` (default 0.05).
+    /// Knee current I_knee \[A\] below which the drop is proportional, key `knee` (default 0.05).
     pub knee_current_a: f64,
 }
 
 /// `inductance_saturation`: the incremental inductance falls as `|I|` grows,
-/// `L(I) = L0 (r + (1 − r)/(1 + (I/I_sat)²))` [H], from L0 at rest towards `r L0`.
+/// `L(I) = L0 (r + (1 − r)/(1 + (I/I_sat)²))` \[H\], from L0 at rest towards `r L0`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct InductanceSaturation {
-    /// Saturation current I_sat [A] where L has fallen half-way, key `isat`.
+    /// Saturation current I_sat \[A\] where L has fallen half-way, key `isat`.
     pub saturation_current_a: f64,
-    /// Ratio r = L(∞)/L0 [-], key `ratio` (default 0.5), in (0, 1].
+    /// Ratio r = L(∞)/L0 \[-\], key `ratio` (default 0.5), in (0, 1].
     pub min_ratio: f64,
 }
 

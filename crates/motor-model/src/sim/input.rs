@@ -2,29 +2,29 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{finite, non_negative, positive, ModelError};
 
-/// Armature voltage waveform E(t) [V] applied by the simulator.
+/// Armature voltage waveform E(t) \[V\] applied by the simulator.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum Input {
-    /// 0 V before `at_s`, then `volts` [V] (either sign). The paper's tests (Sec. 2.4, 4.1).
+    /// 0 V before `at_s`, then `volts` \[V\] (either sign). The paper's tests (Sec. 2.4, 4.1).
     Step {
-        /// Step height [V].
+        /// Step height \[V\].
         volts: f64,
-        /// Step instant [s].
+        /// Step instant \[s\].
         at_s: f64,
     },
-    /// `E(t) = amplitude_v · sin(2π frequency_hz · t)` [V], as in Appendix D
+    /// `E(t) = amplitude_v · sin(2π frequency_hz · t)` \[V\], as in Appendix D
     /// (`0.1 sin(πt/10)`: amplitude 0.1 V, 0.05 Hz).
     Sine {
-        /// Amplitude [V].
+        /// Amplitude \[V\].
         amplitude_v: f64,
-        /// Frequency [Hz].
+        /// Frequency \[Hz\].
         frequency_hz: f64,
     },
 }
 
 impl Input {
-    /// A step of `volts` [V] at `at_s` [s], validated.
+    /// A step of `volts` \[V\] at `at_s` \[s\], validated.
     pub fn step(volts: f64, at_s: f64) -> Result<Self, ModelError> {
         Ok(Input::Step {
             volts: finite("step voltage", volts)?,
@@ -32,7 +32,7 @@ impl Input {
         })
     }
 
-    /// A sine of `amplitude_v` [V] and `frequency_hz` [Hz], validated.
+    /// A sine of `amplitude_v` \[V\] and `frequency_hz` \[Hz\], validated.
     pub fn sine(amplitude_v: f64, frequency_hz: f64) -> Result<Self, ModelError> {
         Ok(Input::Sine {
             amplitude_v: finite("sine amplitude", amplitude_v)?,
@@ -40,7 +40,7 @@ impl Input {
         })
     }
 
-    /// The voltage [V] at time `t_s` [s].
+    /// The voltage \[V\] at time `t_s` \[s\].
     #[inline]
     pub fn volts_at(&self, t_s: f64) -> f64 {
         match *self {
@@ -58,7 +58,7 @@ impl Input {
         }
     }
 
-    /// Largest |E| [V] the waveform reaches.
+    /// Largest |E| \[V\] the waveform reaches.
     pub fn peak_volts(&self) -> f64 {
         match *self {
             Input::Step { volts, .. } => volts.abs(),
@@ -66,7 +66,7 @@ impl Input {
         }
     }
 
-    /// Instants [s] where E(t) jumps; the integrator puts a step boundary on each.
+    /// Instants \[s\] where E(t) jumps; the integrator puts a step boundary on each.
     pub(crate) fn discontinuity(&self) -> Option<f64> {
         match *self {
             Input::Step { at_s, .. } => Some(at_s),

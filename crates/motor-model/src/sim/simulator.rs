@@ -1,7 +1,7 @@
 //! The stick-slip simulator of Appendix D, with pluggable effects.
 //!
-//! The state is `x = [I, Ω, θ, ΔT, I_f]`: armature current [A], speed [rad/s], angle [rad],
-//! winding temperature rise [K] (thermal drift) and the current seen by the sensor [A]
+//! The state is `x = [I, Ω, θ, ΔT, I_f]`: armature current \[A\], speed \[rad/s\], angle \[rad\],
+//! winding temperature rise \[K\] (thermal drift) and the current seen by the sensor \[A\]
 //! (sensor lag). Two modes:
 //!
 //! - **stuck**: `Ω ≡ 0` exactly, `L(I) dI/dt = E − V_brush(I) − R(ΔT) I`; the rotor stays at rest
@@ -52,18 +52,18 @@ enum Mode {
 /// A simulated record at the plant (before the measurement model), SI units.
 #[derive(Debug, Clone, PartialEq, Default, Serialize)]
 pub struct Trace {
-    /// Sample times [s].
+    /// Sample times \[s\].
     pub t: Vec<f64>,
-    /// Armature voltage E(t) applied [V].
+    /// Armature voltage E(t) applied \[V\].
     pub voltage: Vec<f64>,
-    /// Current seen by the current sensor [A] (equals the armature current unless
+    /// Current seen by the current sensor \[A\] (equals the armature current unless
     /// `current_sensor_lag` is on).
     pub current: Vec<f64>,
-    /// True armature current [A].
+    /// True armature current \[A\].
     pub armature_current: Vec<f64>,
-    /// Speed Ω [rad/s].
+    /// Speed Ω \[rad/s\].
     pub speed: Vec<f64>,
-    /// Angle θ [rad].
+    /// Angle θ \[rad\].
     pub position: Vec<f64>,
     /// Whether the rotor was stuck (Coulomb friction holding it) at the sample.
     pub stuck: Vec<bool>,
@@ -100,7 +100,7 @@ impl Simulator {
         })
     }
 
-    /// Simulates `duration_s` [s] from rest, sampled at `rate_hz` [Hz] (`t = 0, 1/rate, …`).
+    /// Simulates `duration_s` \[s\] from rest, sampled at `rate_hz` \[Hz\] (`t = 0, 1/rate, …`).
     pub fn run(&self, duration_s: f64, rate_hz: f64) -> Result<Trace, ModelError> {
         let duration_s = positive("duration", duration_s)?;
         let rate_hz = positive("sample rate", rate_hz)?;
@@ -218,12 +218,12 @@ impl Simulator {
         *x = self.rk4(x, *mode, t, left);
     }
 
-    /// Torque acting on the rotor at rest apart from friction [N·m]: `k I − T_cog(θ)`.
+    /// Torque acting on the rotor at rest apart from friction \[N·m\]: `k I − T_cog(θ)`.
     fn torque_at_rest(&self, x: &State) -> f64 {
         self.params.k_nm_per_a * x[I_IDX] - self.cogging(x[TH_IDX])
     }
 
-    /// Friction torque that holds the rotor at rest [N·m]: `Tst` or `Ts`.
+    /// Friction torque that holds the rotor at rest \[N·m\]: `Tst` or `Ts`.
     fn static_friction(&self) -> f64 {
         self.effects
             .stribeck_friction
@@ -319,7 +319,7 @@ fn axpy(x: &State, a: f64, y: &State) -> State {
     out
 }
 
-/// The fastest time constant [s] among the plant's modes and the effects' own dynamics.
+/// The fastest time constant \[s\] among the plant's modes and the effects' own dynamics.
 fn fastest_time_constant(p: &MotorParams, e: &Effects) -> f64 {
     let sigma = 0.5 * (p.r_ohm / p.l_henry + p.f_nms_per_rad / p.j_kgm2);
     let q = signed_damped_pulsation_sq(p);
