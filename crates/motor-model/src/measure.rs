@@ -270,3 +270,88 @@ impl NoiseRng {
         r * a.cos()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Effects, Input, MotorParams, Simulator};
+
+    fn trace() -> Trace {
+        Simulator::new(
+            MotorParams::paper(),
+            Effects::none(),
+            Input::step(40.0, 0.0).unwrap(),
+        )
+        .unwrap()
+        .run(5.0, 1000.0)
+        .unwrap()
+    }
+
+    #[test]
+    fn adc_round_trip_is_within_half_an_lsb_and_clips_at_the_rails() {
+        let adc = Adc { bits: 10 };
+        let range = Range::new(-10.0, 10.0).unwrap();
+        assert_eq!(adc.full_scale_counts(), 1023);
+        for v in [-9.99, -1.0, 0.0, 0.123, 9.9] {
+            let back = adc.to_value(range, adc.to_counts(range, v));
+            assert!((back - v).abs() <= 0.5 * adc.lsb(range) + 1e-12);
+        }
+        assert_eq!(adc.to_counts(range, 50.0), 1023);
+        assert_eq!(adc.to_counts(range, -50.0), 0);
+        assert_eq!(adc.to_counts(range, f64::NAN), 0);
+    }
+
+    #[test]
+    fn same_seed_same_record_and_clipping_is_counted() {
+        let tr = trace();
+        let model = MeasurementModel {
+            adc: Some(Adc { bits: 10 }),
+            ranges: [None, Some(Range::new(0.0, 60.0).unwrap()), None],
+            noise_std: [0.01, 0.05, 0.1],
+            encoder_counts_per_rev: Some(2000),
+            speed_source: SpeedSource::Encoder,
+            seed: 7,
+        };
+        let a = model.apply(&tr).unwrap();
+        let b = model.apply(&tr).unwrap();
+        assert_eq!(a, b);
+        let c = MeasurementModel {
+            seed: 8,
+            ..model.clone()
+        }
+        .apply(&tr)
+        .unwrap();
+        assert_ne!(a.current, c.current);
+        // The current peaks at about 115 A: the 0-60 A channel clips.
+        assert!(a.clipped[1] > 100, "{:?}", a.clipped);
+        assert_eq!(a.clipped[0], 0);
+        // Encoder angle is a whole number of counts.
+        let quantum = std::f64::consts::TAU / 2000.0;
+        for th in a.position.as_ref().unwrap() {
+            assert!(((th / quantum) - (th / quantum).round()).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn ideal_measurement_is_the_trace() {
+        let tr = trace();
+        let r = MeasurementModel::default().apply(&tr).unwrap();
+        assert_eq!(r.current, tr.current);
+        assert_eq!(r.speed.as_ref().unwrap(), &tr.speed);
+        assert_eq!(r.clipped, [0, 0, 0]);
+    }
+
+    #[test]
+    fn noise_has_the_requested_spread() {
+        let mut rng = NoiseRng::new(3);
+        let n = 100_000;
+        let xs: Vec<f64> = (0..n).map(|_| rng.normal()).collect();
+        let mean = xs.iter().sum::<f64>() / n as f64;
+        let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n as f64;
+        // 5 standard errors: mean ± 0.016, variance ± 0.022.
+        assert!(
+            mean.abs() < 0.016 && (var - 1.0).abs() < 0.022,
+            "{mean} {var}"
+        );
+    }
+}

@@ -105,3 +105,47 @@ impl MotorParams {
         self.r_ohm * self.f_nms_per_rad + self.k_nm_per_a * self.k_nm_per_a
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refuses_non_finite_and_non_positive_values() {
+        let ok = MotorParams::paper();
+        assert!(MotorParams::new(0.3, 0.3, 0.15, 0.05, 1.0, 0.0).is_ok());
+        let cases = [
+            (
+                MotorParams { r_ohm: 0.0, ..ok },
+                "R = 0: must be greater than zero",
+            ),
+            (
+                MotorParams {
+                    l_henry: -1.0,
+                    ..ok
+                },
+                "L = -1",
+            ),
+            (
+                MotorParams {
+                    k_nm_per_a: f64::NAN,
+                    ..ok
+                },
+                "k = NaN: must be a finite number",
+            ),
+            (
+                MotorParams {
+                    f_nms_per_rad: f64::INFINITY,
+                    ..ok
+                },
+                "f = inf",
+            ),
+            (MotorParams { j_kgm2: 0.0, ..ok }, "J = 0"),
+            (MotorParams { ts_nm: -0.1, ..ok }, "Ts = -0.1"),
+        ];
+        for (p, needle) in cases {
+            let msg = p.validate().unwrap_err().to_string();
+            assert!(msg.contains(needle), "{msg}");
+        }
+    }
+}
