@@ -1,15 +1,42 @@
 //! Identification of DC motor parameters by Levenberg–Marquardt (through `argmin`).
 //!
-//! This crate will own, building on [`motor_model`]:
-//! - a Levenberg–Marquardt solver written as an `argmin` `Solver`, with analytic Jacobians,
-//!   parameter scaling and a termination reason in every result;
-//! - the seed paper's identification method: the fit of Eq. (33) to the normalised
-//!   high-voltage current, Eqs. (34)–(44), the low-voltage test (46)–(51), and the
-//!   steady-state apparent-resistance fit (8), (9);
-//! - the full-model identification of R, L, k, f, J, Ts from current and speed records, with
-//!   covariance, 95 % confidence intervals and correlations.
+//! - [`LevenbergMarquardt`]: an `argmin` solver for problems that supply their normal
+//!   equations ([`LeastSquares`]); every result carries its [`Termination`].
+//! - [`fit_33`]: the fit of the paper's Eq. (33) to a normalised high-voltage current.
+//! - [`uncertainty`]: covariance, 95 % intervals (Student t, as MATLAB's `nlparci`) and
+//!   correlations; [`student_t_quantile`].
 //!
 //! It does no I/O: records come in as slices, results go out as values.
+//!
+//! ```
+//! use fit::{fit_33, LmSettings, Params33, Record33};
+//! use motor_model::paper::normalized_current_33;
+//!
+//! let truth = Params33 { alpha: 4.99, sigma: 0.525, omega_a: 0.388 };
+//! let y: Vec<f64> = (0..5000)
+//!     .map(|i| normalized_current_33(truth.alpha, truth.sigma, truth.omega_a, i as f64 * 0.01))
+//!     .collect();
+//! let record = Record33 { t_first: 0.0, dt: 0.01, normalized_current: &y };
+//! let start = Params33 { alpha: 3.0, sigma: 0.4, omega_a: 0.3 };
+//! let fit = fit_33(&record, start, LmSettings::default()).unwrap();
+//! assert!(fit.report.termination.converged());
+//! assert!((fit.params.sigma - 0.525).abs() < 1e-9);
+//! ```
 #![warn(missing_docs)]
 
-pub use motor_model::MotorParams;
+mod error;
+mod lm;
+mod model33;
+mod paper_method;
+mod stats;
+
+pub use error::FitError;
+pub use lm::{
+    solve, LeastSquares, LevenbergMarquardt, LmReport, LmSettings, NormalEquations, Termination,
+};
+pub use model33::{fit_33, Fit33, Params33, Record33};
+pub use paper_method::{
+    from_high_voltage, suggested_low_voltage_45, tau_m_as_printed_37, with_low_voltage,
+    HighVoltageResult, TwoTestFriction,
+};
+pub use stats::{student_t_quantile, uncertainty, Uncertainty};

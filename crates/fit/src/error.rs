@@ -1,0 +1,55 @@
+use std::fmt;
+
+/// Every way an identification can refuse its input.
+///
+/// A fit that runs but does not converge is *not* an error: it is a result whose
+/// [`crate::Termination`] says so.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum FitError {
+    /// A data series is unusable (empty, too short, non-finite, constant…).
+    BadData {
+        /// Which series (e.g. "high-voltage current").
+        series: String,
+        /// What is wrong and what to do.
+        reason: String,
+    },
+    /// A setting is out of range.
+    InvalidSetting {
+        /// Name of the setting.
+        name: &'static str,
+        /// The value given.
+        value: f64,
+        /// What is expected.
+        expected: &'static str,
+    },
+    /// An intermediate quantity of the paper's method left its domain (e.g. σ ≤ ωa, so the
+    /// fitted response is not overdamped and (35)–(37) do not apply).
+    MethodDomain {
+        /// The equation that failed.
+        equation: &'static str,
+        /// Why.
+        reason: String,
+    },
+    /// The optimiser itself failed (not a non-convergence: an internal error).
+    Solver(String),
+}
+
+impl fmt::Display for FitError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            FitError::BadData { series, reason } => write!(f, "{series}: {reason}"),
+            FitError::InvalidSetting {
+                name,
+                value,
+                expected,
+            } => write!(f, "{name} = {value}: expected {expected}"),
+            FitError::MethodDomain { equation, reason } => {
+                write!(f, "{equation} does not apply: {reason}")
+            }
+            FitError::Solver(msg) => write!(f, "optimiser failed: {msg}"),
+        }
+    }
+}
+
+impl std::error::Error for FitError {}

@@ -1,0 +1,347 @@
+//! Levenberg–Marquardt as an `argmin` solver.
+//!
+//! Minimises `C(p) = ½ Σ rᵢ(p)²`. Each iteration solves the damped normal equations
+//!
+//! ```text
+//! (JᵀJ + λ diag(JᵀJ)) δ = −Jᵀr
+//! ```
+//!
+//! (Marquardt's scaling: the damping acts on each parameter in its own units, so parameters of
+//! very different magnitudes — ohms and kg·m² — are handled alike). A step that lowers the cost
+//! is accepted and λ shrinks; one that does not is rejected, λ grows and the step is retried
+//! within the same iteration, so the `argmin` state (parameter, cost) only ever changes on
+//! accepted steps. The problem supplies `JᵀJ` and `Jᵀr` directly ([`NormalEquations`]), which
+//! it can accumulate in one pass over the data without storing `J`.
+//!
+//! The stop that is not success is reported, not raised: [`Termination`].
+
+use argmin::core::{
+    CostFunction, Error as ArgminError, Executor, Gradient, IterState, Problem, Solver, State,
+    TerminationReason, TerminationStatus, KV,
+};
+use nalgebra::{DMatrix, DVector};
+
+use crate::error::FitError;
+
+/// `JᵀJ`, `Jᵀr` and the cost `½‖r‖²` at one parameter vector.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NormalEquations {
+    /// `JᵀJ` (p × p).
+    pub jtj: DMatrix<f64>,
+    /// `Jᵀr` (p).
+    pub jtr: DVector<f64>,
+    /// `½‖r‖²`.
+    pub cost: f64,
+    /// Number of residuals.
+    pub n_residuals: usize,
+}
+
+/// A nonlinear least-squares problem as the solver sees it.
+pub trait LeastSquares {
+    /// Number of parameters.
+    fn n_params(&self) -> usize;
+    /// `½‖r(p)‖²`, or `None` where `p` is outside the model's domain (the step is rejected).
+    fn cost(&self, p: &[f64]) -> Option<f64>;
+    /// Normal equations at `p`, or `None` outside the domain.
+    fn normal_equations(&self, p: &[f64]) -> Option<NormalEquations>;
+}
+
+/// Why the solver stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Termination {
+    /// Relative cost reduction below `ftol` or relative step below `xtol`.
+    Converged,
+    /// Gradient `‖Jᵀr‖∞` below `gtol` (an exact fit).
+    ZeroGradient,
+    /// No step lowered the cost even with the largest damping: a (possibly local) minimum
+    /// reached to the precision of the arithmetic, or a problem the model cannot follow.
+    Stalled,
+    /// The iteration budget ran out before convergence.
+    MaxIterations,
+    /// The residuals or Jacobian became non-finite at the start.
+    NonFinite,
+}
+
+impl Termination {
+    /// Whether this counts as a converged fit.
+    pub fn converged(self) -> bool {
+        matches!(self, Termination::Converged | Termination::ZeroGradient)
+    }
+
+    /// Text for reports.
+    pub fn text(self) -> &'static str {
+        match self {
+            Termination::Converged => "converged",
+            Termination::ZeroGradient => "converged (zero gradient)",
+            Termination::Stalled => "stalled (no step lowers the cost)",
+            Termination::MaxIterations => "maximum iterations reached",
+            Termination::NonFinite => "non-finite residuals",
+        }
+    }
+}
+
+/// Tolerances and limits of the solver.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LmSettings {
+    /// Relative cost reduction below which the fit has converged.
+    pub ftol: f64,
+    /// Relative step size below which the fit has converged.
+    pub xtol: f64,
+    /// Gradient infinity norm below which the fit has converged.
+    pub gtol: f64,
+    /// Maximum accepted iterations.
+    pub max_iters: u64,
+    /// Initial damping λ.
+    pub lambda_start: f64,
+}
+
+impl Default for LmSettings {
+    fn default() -> Self {
+        LmSettings {
+            ftol: 1e-12,
+            xtol: 1e-10,
+            gtol: 0.0,
+            max_iters: 200,
+            lambda_start: 1e-3,
+        }
+    }
+}
+
+impl LmSettings {
+    /// Checks every tolerance is finite and non-negative and the iteration budget positive.
+    pub fn validated(self) -> Result<Self, FitError> {
+        for (name, v) in [
+            ("ftol", self.ftol),
+            ("xtol", self.xtol),
+            ("gtol", self.gtol),
+            ("lambda_start", self.lambda_start),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(FitError::InvalidSetting {
+                    name,
+                    value: v,
+                    expected: "a finite value of zero or more",
+                });
+            }
+        }
+        if self.max_iters == 0 {
+            return Err(FitError::InvalidSetting {
+                name: "max_iters",
+                value: 0.0,
+                expected: "at least one iteration",
+            });
+        }
+        Ok(self)
+    }
+}
+
+/// Largest damping tried before the solver declares itself stalled.
+const LAMBDA_MAX: f64 = 1e16;
+/// Damping floor on `diag(JᵀJ)` relative to its largest entry (keeps the scaling invertible
+/// when a parameter has no influence at the current point).
+const DIAG_FLOOR: f64 = 1e-12;
+
+/// The outcome of a solve.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LmReport {
+    /// Parameters at the end.
+    pub params: Vec<f64>,
+    /// Normal equations at `params` (for covariance).
+    pub normal: NormalEquations,
+    /// Accepted iterations.
+    pub iterations: u64,
+    /// Why it stopped.
+    pub termination: Termination,
+}
+
+/// Adapter from [`LeastSquares`] to argmin's operator traits.
+struct ArgminProblem<'a, P: LeastSquares>(&'a P);
+
+impl<P: LeastSquares> CostFunction for ArgminProblem<'_, P> {
+    type Param = Vec<f64>;
+    type Output = f64;
+    fn cost(&self, p: &Vec<f64>) -> Result<f64, ArgminError> {
+        Ok(self.0.cost(p).unwrap_or(f64::INFINITY))
+    }
+}
+
+impl<P: LeastSquares> Gradient for ArgminProblem<'_, P> {
+    type Param = Vec<f64>;
+    type Gradient = Option<NormalEquations>;
+    fn gradient(&self, p: &Vec<f64>) -> Result<Option<NormalEquations>, ArgminError> {
+        Ok(self.0.normal_equations(p))
+    }
+}
+
+/// The Levenberg–Marquardt solver (an argmin [`Solver`]).
+#[derive(Debug, Clone)]
+pub struct LevenbergMarquardt {
+    settings: LmSettings,
+    lambda: f64,
+    normal: Option<NormalEquations>,
+    last_step_rel: f64,
+    last_cost_rel: f64,
+    stop: Option<Termination>,
+}
+
+impl LevenbergMarquardt {
+    /// A solver with the given settings.
+    pub fn new(settings: LmSettings) -> Result<Self, FitError> {
+        let settings = settings.validated()?;
+        Ok(LevenbergMarquardt {
+            settings,
+            lambda: settings.lambda_start,
+            normal: None,
+            last_step_rel: f64::INFINITY,
+            last_cost_rel: f64::INFINITY,
+            stop: None,
+        })
+    }
+}
+
+type LmState = IterState<Vec<f64>, (), (), (), (), f64>;
+
+fn finite_normal(n: &NormalEquations) -> bool {
+    n.cost.is_finite() && n.jtj.iter().all(|v| v.is_finite()) && n.jtr.iter().all(|v| v.is_finite())
+}
+
+impl<P: LeastSquares> Solver<ArgminProblem<'_, P>, LmState> for LevenbergMarquardt {
+    fn name(&self) -> &str {
+        "Levenberg-Marquardt"
+    }
+
+    fn init(
+        &mut self,
+        problem: &mut Problem<ArgminProblem<'_, P>>,
+        state: LmState,
+    ) -> Result<(LmState, Option<KV>), ArgminError> {
+        let p0 = state
+            .get_param()
+            .cloned()
+            .ok_or_else(|| ArgminError::msg("Levenberg-Marquardt needs a start vector"))?;
+        let normal = problem.gradient(&p0)?;
+        let cost = match &normal {
+            Some(n) if finite_normal(n) => n.cost,
+            _ => {
+                self.stop = Some(Termination::NonFinite);
+                f64::INFINITY
+            }
+        };
+        self.normal = normal;
+        Ok((state.param(p0).cost(cost), None))
+    }
+
+    fn next_iter(
+        &mut self,
+        problem: &mut Problem<ArgminProblem<'_, P>>,
+        state: LmState,
+    ) -> Result<(LmState, Option<KV>), ArgminError> {
+        let p = state
+            .get_param()
+            .cloned()
+            .ok_or_else(|| ArgminError::msg("Levenberg-Marquardt: no current parameter"))?;
+        let Some(normal) = self.normal.clone() else {
+            self.stop = Some(Termination::NonFinite);
+            return Ok((state, None));
+        };
+        let n = p.len();
+        let cost = normal.cost;
+        if normal.jtr.amax() <= self.settings.gtol {
+            self.stop = Some(Termination::ZeroGradient);
+            return Ok((state, None));
+        }
+        let diag_max = (0..n).map(|i| normal.jtj[(i, i)]).fold(0.0_f64, f64::max);
+        loop {
+            let mut a = normal.jtj.clone();
+            for i in 0..n {
+                let d = normal.jtj[(i, i)]
+                    .max(DIAG_FLOOR * diag_max)
+                    .max(f64::MIN_POSITIVE);
+                a[(i, i)] += self.lambda * d;
+            }
+            let step = a.cholesky().map(|c| c.solve(&(-&normal.jtr)));
+            if let Some(delta) = step.filter(|d| d.iter().all(|v| v.is_finite())) {
+                let trial: Vec<f64> = p.iter().zip(delta.iter()).map(|(a, b)| a + b).collect();
+                let trial_cost = problem.cost(&trial)?;
+                if trial_cost < cost {
+                    let trial_normal = problem.gradient(&trial)?;
+                    if let Some(tn) = trial_normal.filter(finite_normal) {
+                        let p_norm = p.iter().map(|v| v * v).sum::<f64>().sqrt();
+                        self.last_step_rel = delta.norm() / (p_norm + self.settings.xtol);
+                        self.last_cost_rel = (cost - trial_cost) / cost.max(f64::MIN_POSITIVE);
+                        self.lambda = (self.lambda / 3.0).max(1e-15);
+                        let new_cost = tn.cost;
+                        self.normal = Some(tn);
+                        return Ok((state.param(trial).cost(new_cost), None));
+                    }
+                }
+            }
+            self.lambda *= 4.0;
+            if self.lambda > LAMBDA_MAX {
+                self.stop = Some(Termination::Stalled);
+                return Ok((state, None));
+            }
+        }
+    }
+
+    fn terminate(&mut self, state: &LmState) -> TerminationStatus {
+        if let Some(stop) = self.stop {
+            return TerminationStatus::Terminated(match stop {
+                Termination::Converged | Termination::ZeroGradient => {
+                    TerminationReason::SolverConverged
+                }
+                other => TerminationReason::SolverExit(other.text().to_string()),
+            });
+        }
+        if state.get_iter() > 0
+            && (self.last_cost_rel <= self.settings.ftol
+                || self.last_step_rel <= self.settings.xtol)
+        {
+            self.stop = Some(Termination::Converged);
+            return TerminationStatus::Terminated(TerminationReason::SolverConverged);
+        }
+        TerminationStatus::NotTerminated
+    }
+}
+
+/// Solves `problem` from `start` with argmin's executor.
+pub fn solve<P: LeastSquares>(
+    problem: &P,
+    start: &[f64],
+    settings: LmSettings,
+) -> Result<LmReport, FitError> {
+    if start.len() != problem.n_params() {
+        return Err(FitError::Solver(format!(
+            "start vector has {} entries for {} parameters",
+            start.len(),
+            problem.n_params()
+        )));
+    }
+    let solver = LevenbergMarquardt::new(settings)?;
+    let result = Executor::new(ArgminProblem(problem), solver)
+        .configure(|s| s.param(start.to_vec()).max_iters(settings.max_iters))
+        .timer(false)
+        .run()
+        .map_err(|e| FitError::Solver(e.to_string()))?;
+    let state = result.state();
+    let iterations = state.get_iter();
+    let solver = result.solver();
+    let termination = match solver.stop {
+        Some(t) => t,
+        None => Termination::MaxIterations,
+    };
+    let params = state
+        .get_param()
+        .cloned()
+        .ok_or_else(|| FitError::Solver("no final parameter".into()))?;
+    let normal = solver
+        .normal
+        .clone()
+        .ok_or_else(|| FitError::Solver("no normal equations at the end".into()))?;
+    Ok(LmReport {
+        params,
+        normal,
+        iterations,
+        termination,
+    })
+}

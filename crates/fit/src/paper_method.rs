@@ -1,0 +1,186 @@
+//! The paper's identification method (Sec. 2.2 and 2.4), equation by equation.
+//!
+//! The high-voltage test gives α, σ, ωa by the fit of (33) ([`crate::fit_33`]); from them and
+//! the steady values `Irm`, `Ωrm`, Eqs. (34)–(44) give every parameter but Ts
+//! ([`from_high_voltage`]); the low-voltage test adds Ts by (46)–(48) and refines the static
+//! gains by (49)–(51) ([`with_low_voltage`]). Eq. (37) is used in its corrected form (erratum
+//! E8 in `docs/errata.md`).
+
+use crate::error::FitError;
+use crate::model33::Params33;
+
+/// Everything Eqs. (34)–(44) compute from the high-voltage test (the paper's Table 4).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HighVoltageResult {
+    /// Eq. (34) `KE,c = Irm/Em` \[A/V\].
+    pub k_e: f64,
+    /// Eq. (35) `ωn,c = ωa √((σ/ωa)² − 1)` \[rad/s\].
+    pub omega_n: f64,
+    /// Eq. (36) `ζc = 1/√(1 − (ωa/σ)²)` [-].
+    pub zeta: f64,
+    /// Eq. (37), corrected: `τm,c = (σ/ωa + √(α² + 1)) / (ωa ((σ/ωa)² − 1))` \[s\].
+    pub tau_m: f64,
+    /// Eq. (38) `Lc = 1/(KE τm ωn²)` \[H\].
+    pub l_henry: f64,
+    /// Eq. (39) `Rc = (2ζ/(ωn KE) − L)/τm` \[Ω\].
+    pub r_ohm: f64,
+    /// Eq. (41) `kc = Irm (1 − R KE)/(KE Ωrm)` \[N·m/A\].
+    pub k_nm_per_a: f64,
+    /// Eq. (42) `fc = k Irm/Ωrm` \[N·m·s/rad\].
+    pub f_nms_per_rad: f64,
+    /// Eq. (43) `Jc = τm f` \[kg·m²\].
+    pub j_kgm2: f64,
+    /// Eq. (44) `Ks,c = k/(R f + k²)` \[A/(N·m)\].
+    pub k_s: f64,
+}
+
+fn domain(equation: &'static str, reason: String) -> FitError {
+    FitError::MethodDomain { equation, reason }
+}
+
+/// Eqs. (34)–(44) from the (33) fit and the high-voltage test's `Em` \[V\], `Irm` \[A\] and
+/// `Ωrm` \[rad/s\] (the paper uses the values at the end of the record, Table 2).
+pub fn from_high_voltage(
+    fit: Params33,
+    e_m_volt: f64,
+    i_rm_a: f64,
+    omega_rm_rad_s: f64,
+) -> Result<HighVoltageResult, FitError> {
+    let Params33 {
+        alpha,
+        sigma,
+        omega_a,
+    } = fit;
+    for (name, v) in [
+        ("Em", e_m_volt),
+        ("Irm", i_rm_a),
+        ("Ωrm", omega_rm_rad_s),
+        ("α", alpha),
+        ("σ", sigma),
+        ("ωa", omega_a),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(domain(
+                "Eqs. (34)-(44)",
+                format!("{name} = {v}: the method needs it finite and positive"),
+            ));
+        }
+    }
+    let ratio = sigma / omega_a;
+    if ratio <= 1.0 {
+        return Err(domain(
+            "Eqs. (35)-(37)",
+            format!("σ = {sigma} ≤ ωa = {omega_a}: the fitted response is not overdamped"),
+        ));
+    }
+    let k_e = i_rm_a / e_m_volt; // (34)
+    let omega_n = omega_a * (ratio * ratio - 1.0).sqrt(); // (35)
+    let zeta = 1.0 / (1.0 - (omega_a / sigma).powi(2)).sqrt(); // (36)
+    let tau_m = (ratio + (alpha * alpha + 1.0).sqrt()) / (omega_a * (ratio * ratio - 1.0)); // (37) corrected
+    let l_henry = 1.0 / (k_e * tau_m * omega_n * omega_n); // (38)
+    let r_ohm = (2.0 * zeta / (omega_n * k_e) - l_henry) / tau_m; // (39)
+    let k_nm_per_a = i_rm_a * (1.0 - r_ohm * k_e) / (k_e * omega_rm_rad_s); // (41)
+    let f_nms_per_rad = i_rm_a / omega_rm_rad_s * k_nm_per_a; // (42)
+    let j_kgm2 = tau_m * f_nms_per_rad; // (43)
+    let k_s = k_nm_per_a / (r_ohm * f_nms_per_rad + k_nm_per_a * k_nm_per_a); // (44)
+    let out = HighVoltageResult {
+        k_e,
+        omega_n,
+        zeta,
+        tau_m,
+        l_henry,
+        r_ohm,
+        k_nm_per_a,
+        f_nms_per_rad,
+        j_kgm2,
+        k_s,
+    };
+    for (name, v) in [
+        ("L (38)", l_henry),
+        ("R (39)", r_ohm),
+        ("k (41)", k_nm_per_a),
+        ("f (42)", f_nms_per_rad),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(domain(
+                "Eqs. (38)-(44)",
+                format!("{name} = {v}: the high-voltage test does not determine a physical motor (is the step high enough, Eq. (31)?)"),
+            ));
+        }
+    }
+    Ok(out)
+}
+
+/// Eq. (37) exactly as printed: `(σ/ωa + √(α²+1)) / (ωa √((σ/ωa)² − 1))` \[s\]. Kept to show
+/// that it contradicts the paper's own Table 4 (erratum E8).
+pub fn tau_m_as_printed_37(fit: Params33) -> f64 {
+    let ratio = fit.sigma / fit.omega_a;
+    (ratio + (fit.alpha * fit.alpha + 1.0).sqrt()) / (fit.omega_a * (ratio * ratio - 1.0).sqrt())
+}
+
+/// The apparent-resistance coefficients and Ts from the two tests, Eqs. (46)–(48).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TwoTestFriction {
+    /// Eq. (47) `a` \[Ω\].
+    pub a_ohm: f64,
+    /// Eq. (47) `b` \[Ω·A\].
+    pub b_ohm_a: f64,
+    /// Eq. (48) `Ts,c = k b/a` \[N·m\].
+    pub ts_nm: f64,
+    /// Eq. (50) refined `KE` \[A/V\].
+    pub k_e: f64,
+    /// Eq. (51) refined `Ks` \[A/(N·m)\].
+    pub k_s: f64,
+}
+
+/// Eqs. (46)–(51): Ts from the high- and low-voltage steady states (`Em`, `Irm`, `Eb`, `Irb`;
+/// V and A) with `Rc` \[Ω\] and `kc` \[N·m/A\] of the high-voltage test, then the refined gains.
+pub fn with_low_voltage(
+    r_c_ohm: f64,
+    k_c: f64,
+    e_m_volt: f64,
+    i_rm_a: f64,
+    e_b_volt: f64,
+    i_rb_a: f64,
+) -> Result<TwoTestFriction, FitError> {
+    if !(e_b_volt.is_finite() && i_rb_a.is_finite() && e_b_volt > 0.0 && i_rb_a > 0.0) {
+        return Err(domain(
+            "Eqs. (46)-(48)",
+            format!("Eb = {e_b_volt} V, Irb = {i_rb_a} A: both must be finite and positive"),
+        ));
+    }
+    if (i_rm_a - i_rb_a).abs() <= f64::EPSILON * i_rm_a || (e_m_volt - e_b_volt).abs() <= 0.0 {
+        return Err(domain(
+            "Eqs. (47), (50)",
+            format!("the two tests must differ: Em = {e_m_volt} V, Eb = {e_b_volt} V, Irm = {i_rm_a} A, Irb = {i_rb_a} A"),
+        ));
+    }
+    let dr_m = e_m_volt / i_rm_a - r_c_ohm; // (46)
+    let dr_b = e_b_volt / i_rb_a - r_c_ohm;
+    let a_ohm = (dr_b * i_rb_a - dr_m * i_rm_a) / (i_rb_a - i_rm_a); // (47)
+    let b_ohm_a = i_rb_a * i_rm_a * (dr_b - dr_m) / (i_rb_a - i_rm_a);
+    // (48), in the measured values:
+    let ts_nm = k_c * (e_b_volt * i_rm_a - e_m_volt * i_rb_a)
+        / (r_c_ohm * (i_rm_a - i_rb_a) + e_b_volt - e_m_volt);
+    if !(ts_nm.is_finite() && ts_nm > 0.0) {
+        return Err(domain(
+            "Eq. (48)",
+            format!("Ts = {ts_nm} N·m: the low-voltage test shows no Coulomb friction (is Eb low enough, Eq. (45)?)"),
+        ));
+    }
+    let k_e = (i_rm_a - i_rb_a) / (e_m_volt - e_b_volt); // (50)
+    let k_s = (e_m_volt * i_rb_a - e_b_volt * i_rm_a) / (ts_nm * (e_m_volt - e_b_volt)); // (51)
+    Ok(TwoTestFriction {
+        a_ohm,
+        b_ohm_a,
+        ts_nm,
+        k_e,
+        k_s,
+    })
+}
+
+/// Eq. (45): the order of magnitude of a low test voltage, `½ (R/k + k/f)` \[V per N·m … \]
+/// times nothing — the paper's empirical starting point `Eb ≈ ½ (Rc/kc + kc/fc)` \[V\].
+pub fn suggested_low_voltage_45(r_c: f64, k_c: f64, f_c: f64) -> f64 {
+    0.5 * (r_c / k_c + k_c / f_c)
+}
