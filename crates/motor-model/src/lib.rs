@@ -33,6 +33,7 @@ mod error;
 mod measure;
 pub mod paper;
 mod params;
+mod real;
 mod sim;
 mod steady;
 mod step;
@@ -43,6 +44,7 @@ pub use measure::{
     central_difference, Adc, MeasurementModel, NoiseRng, Range, Record, SpeedSource,
 };
 pub use params::MotorParams;
+pub use real::{Dual, Real};
 pub use sim::effects::{
     BrushDrop, CoggingTorque, CurrentSensorLag, Effect, Effects, InductanceSaturation,
     QuadraticDrag, StribeckFriction, ThermalDrift, COPPER_ALPHA_PER_K, EFFECT_NAMES,

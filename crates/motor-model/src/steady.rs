@@ -2,6 +2,27 @@ use serde::Serialize;
 
 use crate::error::ModelError;
 use crate::params::MotorParams;
+use crate::real::Real;
+
+/// Eq. (11) in any scalar: `t0 = −τe ln(1 − R Ts/(k E))` for `E = e_abs > 0`, `None` when
+/// `R Ts/(k E) ≥ 1`.
+pub(crate) fn breakaway_generic<T: Real>(r: T, l: T, k: T, ts: T, e_abs: T) -> Option<T> {
+    if e_abs.value() <= 0.0 {
+        return None;
+    }
+    if ts.value() == 0.0 {
+        return Some(T::cst(0.0));
+    }
+    let ratio = r * ts / (k * e_abs);
+    (ratio.value() < 1.0).then(|| -(l / r) * (-ratio).ln_1p())
+}
+
+/// Eqs. (4), (5) in any scalar for `E = e_abs > 0` of a moving motor: `(Ir, Ωr)`, with Ir as
+/// `KE E + Ks Ts` (49) to avoid cancellation.
+pub(crate) fn steady_generic<T: Real>(r: T, k: T, f: T, ts: T, e_abs: T) -> (T, T) {
+    let rf_k2 = r * f + k * k;
+    ((f * e_abs + k * ts) / rf_k2, (e_abs * k - ts * r) / rf_k2)
+}
 
 /// Steady state of a voltage step, Eqs. (4) and (5).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -35,10 +56,11 @@ pub fn steady_state(p: &MotorParams, e_volt: f64) -> SteadyState {
             moving: false,
         };
     }
-    let rf_k2 = p.rf_plus_k2();
+    let (current_a, speed_rad_s) =
+        steady_generic(p.r_ohm, p.k_nm_per_a, p.f_nms_per_rad, p.ts_nm, e);
     SteadyState {
-        speed_rad_s: dir * (e * p.k_nm_per_a - p.ts_nm * p.r_ohm) / rf_k2,
-        current_a: dir * (p.f_nms_per_rad * e + p.k_nm_per_a * p.ts_nm) / rf_k2,
+        speed_rad_s: dir * speed_rad_s,
+        current_a: dir * current_a,
         moving: true,
     }
 }
@@ -52,12 +74,7 @@ pub fn standstill_current(p: &MotorParams, e_volt: f64, t_s: f64) -> f64 {
 ///
 /// `None` when `|E| ≤ R Ts/k`: the torque `k I` never exceeds `Ts` and the motor stays at rest.
 pub fn breakaway_time(p: &MotorParams, e_volt: f64) -> Option<f64> {
-    let e = e_volt.abs();
-    if p.ts_nm == 0.0 {
-        return (e > 0.0).then_some(0.0);
-    }
-    let ratio = p.r_ohm * p.ts_nm / (p.k_nm_per_a * e);
-    (ratio < 1.0).then(|| -(p.l_henry / p.r_ohm) * (-ratio).ln_1p())
+    breakaway_generic(p.r_ohm, p.l_henry, p.k_nm_per_a, p.ts_nm, e_volt.abs())
 }
 
 /// Apparent resistance increase of Eqs. (6)–(8): `ΔR = E/Ir − R = a − b/Ir` \[Ω\].

@@ -24,8 +24,9 @@ use serde::Serialize;
 
 use crate::error::{non_negative, positive, ModelError};
 use crate::params::MotorParams;
+use crate::real::Real;
 use crate::sim::simulator::{Trace, MAX_SAMPLES};
-use crate::steady::{breakaway_time, standstill_current, steady_state};
+use crate::steady::{breakaway_generic, steady_generic};
 
 /// Samples between exact re-evaluations of the grid recurrence (bounds rounding drift to
 /// about `REANCHOR_SAMPLES` ulps).
@@ -40,29 +41,30 @@ const SERIES_LIMIT: f64 = 1e-2;
 
 /// One instant of a motor's response.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
-pub struct MotorState {
+pub struct MotorState<T = f64> {
     /// Armature current I \[A\].
-    pub current_a: f64,
+    pub current_a: T,
     /// Shaft speed Ω \[rad/s\].
-    pub speed_rad_s: f64,
+    pub speed_rad_s: T,
     /// Shaft angle θ \[rad\], 0 at the step instant.
-    pub position_rad: f64,
+    pub position_rad: T,
 }
 
 /// `(C(τ), S(τ))` of the module docs for signed `q` \[1/s²\] and `τ` \[s\].
-pub(crate) fn cosh_sinhc(q: f64, tau: f64) -> (f64, f64) {
+pub(crate) fn cosh_sinhc<T: Real>(q: T, tau: T) -> (T, T) {
     let u = q * tau * tau;
-    if u.abs() < SERIES_LIMIT {
+    let one = T::cst(1.0);
+    if u.value().abs() < SERIES_LIMIT {
         // Horner on Σ uⁿ/(2n)! and Σ uⁿ/(2n+1)!, n = 0..8.
-        let mut c = 1.0;
-        let mut s = 1.0;
+        let mut c = one;
+        let mut s = one;
         for n in (1..=8u32).rev() {
             let two_n = f64::from(2 * n);
-            c = 1.0 + u * c / (two_n * (two_n - 1.0));
-            s = 1.0 + u * s / (two_n * (two_n + 1.0));
+            c = one + u * c * T::cst(1.0 / (two_n * (two_n - 1.0)));
+            s = one + u * s * T::cst(1.0 / (two_n * (two_n + 1.0)));
         }
         (c, tau * s)
-    } else if q > 0.0 {
+    } else if q.value() > 0.0 {
         let w = q.sqrt();
         ((w * tau).cosh(), (w * tau).sinh() / w)
     } else {
@@ -76,14 +78,15 @@ pub(crate) fn cosh_sinhc(q: f64, tau: f64) -> (f64, f64) {
 /// `omega_n2 = ωn² = σ² − q`. For ζ > 1 and `ωa τ` large the product is split into the slow
 /// and fast modes, the slow rate `σ − ωa` being formed as `ωn²/(σ + ωa)` (no cancellation
 /// for strongly overdamped motors, τe ≪ τm).
-pub(crate) fn decayed_cosh_sinhc(sigma: f64, q: f64, omega_n2: f64, tau: f64) -> (f64, f64) {
-    if q > 0.0 {
+pub(crate) fn decayed_cosh_sinhc<T: Real>(sigma: T, q: T, omega_n2: T, tau: T) -> (T, T) {
+    if q.value() > 0.0 {
         let w = q.sqrt();
-        if w * tau > 1.0 {
+        if (w * tau).value() > 1.0 {
+            let half = T::cst(0.5);
             let fast_rate = sigma + w;
             let slow = (-(omega_n2 / fast_rate) * tau).exp();
             let fast = (-fast_rate * tau).exp();
-            return (0.5 * (slow + fast), 0.5 * (slow - fast) / w);
+            return (half * (slow + fast), half * (slow - fast) / w);
         }
     }
     let decay = (-sigma * tau).exp();
@@ -96,175 +99,46 @@ pub(crate) fn decayed_cosh_sinhc(sigma: f64, q: f64, omega_n2: f64, tau: f64) ->
 ///
 /// Either sign of `E`: a negative step is the mirror image. When `|E| ≤ R Ts/k` the motor never
 /// moves and the current follows (10) for ever.
+///
+/// Generic over the scalar: `StepResponse<f64>` (the default) for values,
+/// `StepResponse<Dual<N>>` for values with exact derivatives with respect to the parameters
+/// (see [`StepResponse::from_values`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct StepResponse {
-    params: MotorParams,
-    e_abs: f64,
+pub struct StepResponse<T = f64> {
+    r_ohm: T,
+    l_henry: T,
+    e_abs: T,
     dir: f64,
-    t0: Option<f64>,
-    sigma: f64,
-    q: f64,
-    omega_n2: f64,
-    i_r: f64,
-    omega_r: f64,
+    t0: Option<T>,
+    sigma: T,
+    q: T,
+    omega_n2: T,
+    i_r: T,
+    omega_r: T,
     /// `y(0) = x(t0) − x_r`.
-    y0: [f64; 2],
+    y0: [T; 2],
     /// `(A + σ𝟙) y(0)`.
-    w0: [f64; 2],
+    w0: [T; 2],
     /// Speed components of `z = A⁻¹ y(0)` and `(A + σ𝟙) z`, for the angle.
-    z0_speed: f64,
-    wz0_speed: f64,
+    z0_speed: T,
+    wz0_speed: T,
 }
 
-impl StepResponse {
+impl StepResponse<f64> {
     /// Prepares the response of `params` to a step of `e_volt` \[V\].
     pub fn new(params: &MotorParams, e_volt: f64) -> Self {
-        let p = *params;
-        let dir = if e_volt < 0.0 { -1.0 } else { 1.0 };
-        let e_abs = e_volt.abs();
-        let t0 = if e_abs > 0.0 {
-            breakaway_time(&p, e_abs)
-        } else {
-            None
-        };
-        let ss = steady_state(&p, e_abs);
-        let (l, r, k, f, j) = (p.l_henry, p.r_ohm, p.k_nm_per_a, p.f_nms_per_rad, p.j_kgm2);
-        let sigma = 0.5 * (r / l + f / j);
-        let q = crate::derived::signed_damped_pulsation_sq(&p);
-        let omega_n2 = p.rf_plus_k2() / (l * j);
-        let a = [[-r / l, -k / l], [k / j, -f / j]];
-        let y0 = [p.ts_nm / k - ss.current_a, -ss.speed_rad_s];
-        let shifted = |v: [f64; 2]| {
+        let p = params;
+        StepResponse::from_values(
             [
-                (a[0][0] + sigma) * v[0] + a[0][1] * v[1],
-                a[1][0] * v[0] + (a[1][1] + sigma) * v[1],
-            ]
-        };
-        let w0 = shifted(y0);
-        // A⁻¹ = [[a11', −a01], [−a10, a00]] / det, det = ωn².
-        let z0 = [
-            (a[1][1] * y0[0] - a[0][1] * y0[1]) / omega_n2,
-            (-a[1][0] * y0[0] + a[0][0] * y0[1]) / omega_n2,
-        ];
-        let wz0 = shifted(z0);
-        StepResponse {
-            params: p,
-            e_abs,
-            dir,
-            t0,
-            sigma,
-            q,
-            omega_n2,
-            i_r: ss.current_a,
-            omega_r: ss.speed_rad_s,
-            y0,
-            w0,
-            z0_speed: z0[1],
-            wz0_speed: wz0[1],
-        }
-    }
-
-    /// Breakaway instant t0 \[s\] of Eq. (11), `None` if the motor never moves.
-    pub fn breakaway_time(&self) -> Option<f64> {
-        self.t0
-    }
-
-    /// Steady current Ir \[A\] and speed Ωr \[rad/s\] of Eqs. (4), (5), signed like `E`.
-    pub fn steady(&self) -> (f64, f64) {
-        if self.t0.is_some() {
-            (self.dir * self.i_r, self.dir * self.omega_r)
-        } else {
-            (self.dir * self.e_abs / self.params.r_ohm, 0.0)
-        }
-    }
-
-    #[inline(always)]
-    fn moving_state(&self, tau: f64, ec: f64, es: f64) -> MotorState {
-        MotorState {
-            current_a: self.dir * (self.i_r + ec * self.y0[0] + es * self.w0[0]),
-            speed_rad_s: self.dir * (self.omega_r + ec * self.y0[1] + es * self.w0[1]),
-            position_rad: self.dir
-                * (self.omega_r * tau + ec * self.z0_speed + es * self.wz0_speed - self.z0_speed),
-        }
-    }
-
-    #[inline(always)]
-    fn standstill_state(&self, t: f64) -> MotorState {
-        MotorState {
-            current_a: standstill_current(&self.params, self.dir * self.e_abs, t.max(0.0)),
-            speed_rad_s: 0.0,
-            position_rad: 0.0,
-        }
-    }
-
-    /// Current, speed and angle at time `t_s` \[s\] after the step (0 for `t < 0`).
-    pub fn at(&self, t_s: f64) -> MotorState {
-        match self.t0 {
-            Some(t0) if t_s > t0 => {
-                let tau = t_s - t0;
-                let (ec, es) = decayed_cosh_sinhc(self.sigma, self.q, self.omega_n2, tau);
-                self.moving_state(tau, ec, es)
-            }
-            _ => self.standstill_state(t_s),
-        }
-    }
-
-    /// Walks the grid `t_i = t_first + i·dt`, calling `emit(i, state)` for each of `n` samples.
-    #[inline(always)]
-    fn walk(&self, t_first: f64, dt: f64, n: usize, mut emit: impl FnMut(usize, MotorState)) {
-        let t_of = |i: usize| t_first + i as f64 * dt;
-        let Some(t0) = self.t0 else {
-            for i in 0..n {
-                emit(i, self.standstill_state(t_of(i)));
-            }
-            return;
-        };
-        let mut i = 0;
-        while i < n && t_of(i) <= t0 {
-            emit(i, self.standstill_state(t_of(i)));
-            i += 1;
-        }
-        let usable_step = dt > 0.0 && self.sigma * dt <= MAX_SIGMA_STEP;
-        if !usable_step {
-            for j in i..n {
-                emit(j, self.at(t_of(j)));
-            }
-            return;
-        }
-        let (c_h, s_h) = cosh_sinhc(self.q, dt);
-        let decay_h = (-self.sigma * dt).exp();
-        let (step_c, step_qs, step_s) = (decay_h * c_h, decay_h * self.q * s_h, decay_h * s_h);
-        let mut ec = 0.0;
-        let mut es = 0.0;
-        for j in i..n {
-            let tau = t_of(j) - t0;
-            if (j - i) % REANCHOR_SAMPLES == 0 {
-                (ec, es) = decayed_cosh_sinhc(self.sigma, self.q, self.omega_n2, tau);
-            } else {
-                (ec, es) = (ec * step_c + es * step_qs, es * step_c + ec * step_s);
-            }
-            emit(j, self.moving_state(tau, ec, es));
-        }
-    }
-
-    /// Fills `out[i]` with the state at `t_first + i·dt` \[s\]. No allocation.
-    pub fn fill(&self, t_first: f64, dt: f64, out: &mut [MotorState]) {
-        let n = out.len();
-        self.walk(t_first, dt, n, |i, s| {
-            if let Some(slot) = out.get_mut(i) {
-                *slot = s;
-            }
-        });
-    }
-
-    /// Fills `out[i]` with the current \[A\] at `t_first + i·dt` \[s\]. No allocation.
-    pub fn fill_current(&self, t_first: f64, dt: f64, out: &mut [f64]) {
-        let n = out.len();
-        self.walk(t_first, dt, n, |i, s| {
-            if let Some(slot) = out.get_mut(i) {
-                *slot = s.current_a;
-            }
-        });
+                p.r_ohm,
+                p.l_henry,
+                p.k_nm_per_a,
+                p.f_nms_per_rad,
+                p.j_kgm2,
+                p.ts_nm,
+            ],
+            e_volt,
+        )
     }
 
     /// A record of this step applied at `at_s` \[s\] (0 V before), sampled at `rate_hz` \[Hz\]
@@ -304,5 +178,165 @@ impl StepResponse {
             stuck: t.iter().map(|&ti| ti - at_s <= t0).collect(),
             t,
         })
+    }
+}
+
+impl<T: Real> StepResponse<T> {
+    /// The response for parameters `[R, L, k, f, J, Ts]` (SI units, in any [`Real`] scalar) to a
+    /// step of `e_volt` \[V\]. The parameters are trusted: validate them with
+    /// [`MotorParams::validate`] first.
+    pub fn from_values(params: [T; 6], e_volt: f64) -> Self {
+        let [r, l, k, f, j, ts] = params;
+        let half = T::cst(0.5);
+        let dir = if e_volt < 0.0 { -1.0 } else { 1.0 };
+        let e_abs = T::cst(e_volt.abs());
+        let rf_k2 = r * f + k * k;
+        let t0 = breakaway_generic(r, l, k, ts, e_abs);
+        let (i_r, omega_r) = steady_generic(r, k, f, ts, e_abs);
+        let a = [[-r / l, -k / l], [k / j, -f / j]];
+        let sigma = half * (r / l + f / j);
+        // q = σ² − ωn² written without cancellation, as in `Derived`.
+        let half_diff = half * (r / l - f / j);
+        let q = half_diff * half_diff - k * k / (l * j);
+        let omega_n2 = rf_k2 / (l * j);
+        let y0 = [ts / k - i_r, -omega_r];
+        let shifted = |v: [T; 2]| {
+            [
+                (a[0][0] + sigma) * v[0] + a[0][1] * v[1],
+                a[1][0] * v[0] + (a[1][1] + sigma) * v[1],
+            ]
+        };
+        let w0 = shifted(y0);
+        // A⁻¹ = [[a11, −a01], [−a10, a00]] / det, det = ωn².
+        let z0 = [
+            (a[1][1] * y0[0] - a[0][1] * y0[1]) / omega_n2,
+            (-a[1][0] * y0[0] + a[0][0] * y0[1]) / omega_n2,
+        ];
+        let wz0 = shifted(z0);
+        StepResponse {
+            r_ohm: r,
+            l_henry: l,
+            e_abs,
+            dir,
+            t0,
+            sigma,
+            q,
+            omega_n2,
+            i_r,
+            omega_r,
+            y0,
+            w0,
+            z0_speed: z0[1],
+            wz0_speed: wz0[1],
+        }
+    }
+
+    /// Breakaway instant t0 \[s\] of Eq. (11), `None` if the motor never moves.
+    pub fn breakaway_time(&self) -> Option<T> {
+        self.t0
+    }
+
+    /// Steady current Ir \[A\] and speed Ωr \[rad/s\] of Eqs. (4), (5), signed like `E`.
+    pub fn steady(&self) -> (T, T) {
+        let dir = T::cst(self.dir);
+        if self.t0.is_some() {
+            (dir * self.i_r, dir * self.omega_r)
+        } else {
+            (dir * self.e_abs / self.r_ohm, T::cst(0.0))
+        }
+    }
+
+    #[inline(always)]
+    fn moving_state(&self, tau: T, ec: T, es: T) -> MotorState<T> {
+        let dir = T::cst(self.dir);
+        MotorState {
+            current_a: dir * (self.i_r + ec * self.y0[0] + es * self.w0[0]),
+            speed_rad_s: dir * (self.omega_r + ec * self.y0[1] + es * self.w0[1]),
+            position_rad: dir
+                * (self.omega_r * tau + ec * self.z0_speed + es * self.wz0_speed - self.z0_speed),
+        }
+    }
+
+    /// Eq. (10) at `t` (clamped at 0).
+    #[inline(always)]
+    fn standstill_state(&self, t: f64) -> MotorState<T> {
+        let t = T::cst(t.max(0.0));
+        MotorState {
+            current_a: -T::cst(self.dir) * self.e_abs / self.r_ohm
+                * (-t * self.r_ohm / self.l_henry).exp_m1(),
+            speed_rad_s: T::cst(0.0),
+            position_rad: T::cst(0.0),
+        }
+    }
+
+    /// Current, speed and angle at time `t_s` \[s\] after the step (0 for `t < 0`).
+    pub fn at(&self, t_s: f64) -> MotorState<T> {
+        match self.t0 {
+            Some(t0) if t_s > t0.value() => {
+                let tau = T::cst(t_s) - t0;
+                let (ec, es) = decayed_cosh_sinhc(self.sigma, self.q, self.omega_n2, tau);
+                self.moving_state(tau, ec, es)
+            }
+            _ => self.standstill_state(t_s),
+        }
+    }
+
+    /// Walks the grid `t_i = t_first + i·dt`, calling `emit(i, state)` for each of `n` samples.
+    #[inline(always)]
+    fn walk(&self, t_first: f64, dt: f64, n: usize, mut emit: impl FnMut(usize, MotorState<T>)) {
+        let t_of = |i: usize| t_first + i as f64 * dt;
+        let Some(t0) = self.t0 else {
+            for i in 0..n {
+                emit(i, self.standstill_state(t_of(i)));
+            }
+            return;
+        };
+        let mut i = 0;
+        while i < n && t_of(i) <= t0.value() {
+            emit(i, self.standstill_state(t_of(i)));
+            i += 1;
+        }
+        let usable_step = dt > 0.0 && self.sigma.value() * dt <= MAX_SIGMA_STEP;
+        if !usable_step {
+            for j in i..n {
+                emit(j, self.at(t_of(j)));
+            }
+            return;
+        }
+        let h = T::cst(dt);
+        let (c_h, s_h) = cosh_sinhc(self.q, h);
+        let decay_h = (-self.sigma * h).exp();
+        let (step_c, step_qs, step_s) = (decay_h * c_h, decay_h * self.q * s_h, decay_h * s_h);
+        let mut ec = T::cst(0.0);
+        let mut es = T::cst(0.0);
+        for j in i..n {
+            let tau = T::cst(t_of(j)) - t0;
+            if (j - i) % REANCHOR_SAMPLES == 0 {
+                (ec, es) = decayed_cosh_sinhc(self.sigma, self.q, self.omega_n2, tau);
+            } else {
+                (ec, es) = (ec * step_c + es * step_qs, es * step_c + ec * step_s);
+            }
+            emit(j, self.moving_state(tau, ec, es));
+        }
+    }
+
+    /// Fills `out[i]` with the state at `t_first + i·dt` \[s\]. No allocation.
+    pub fn fill(&self, t_first: f64, dt: f64, out: &mut [MotorState<T>]) {
+        let n = out.len();
+        self.walk(t_first, dt, n, |i, s| {
+            if let Some(slot) = out.get_mut(i) {
+                *slot = s;
+            }
+        });
+    }
+
+    /// Fills `out[i]` with the current \[A\] at `t_first + i·dt` \[s\]. No allocation.
+    pub fn fill_current(&self, t_first: f64, dt: f64, out: &mut [T]) {
+        let n = out.len();
+        self.walk(t_first, dt, n, |i, s| {
+            if let Some(slot) = out.get_mut(i) {
+                *slot = s.current_a;
+            }
+        });
     }
 }
