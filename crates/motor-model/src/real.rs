@@ -228,7 +228,8 @@ mod tests {
 
     #[test]
     fn derivatives_of_elementary_functions_match_finite_differences() {
-        let fs: [(&str, fn(Dual<1>) -> Dual<1>, fn(f64) -> f64); 8] = [
+        type Case = (&'static str, fn(Dual<1>) -> Dual<1>, fn(f64) -> f64);
+        let fs: [Case; 8] = [
             ("exp", |x| x.exp(), f64::exp),
             ("exp_m1", |x| x.exp_m1(), f64::exp_m1),
             ("ln_1p", |x| x.ln_1p(), f64::ln_1p),

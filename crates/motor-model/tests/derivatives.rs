@@ -53,7 +53,8 @@ proptest! {
             // Same absolute times: the perturbed t0 moves, the samples do not.
             su.fill(t_first, dt, &mut gu);
             sd.fill(t_first, dt, &mut gd);
-            let channels: [(fn(&MotorState<Dual<6>>) -> Dual<6>, fn(&MotorState<f64>) -> f64); 3] = [
+            type Channel = (fn(&MotorState<Dual<6>>) -> Dual<6>, fn(&MotorState<f64>) -> f64);
+            let channels: [Channel; 3] = [
                 (|s| s.current_a, |s| s.current_a),
                 (|s| s.speed_rad_s, |s| s.speed_rad_s),
                 (|s| s.position_rad, |s| s.position_rad),
