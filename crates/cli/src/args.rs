@@ -19,8 +19,43 @@ pub enum Command {
     Model(ModelArgs),
     /// Simulate a motor (exact analytic step or stick-slip ODE with effects) to a record CSV.
     Simulate(Box<SimulateArgs>),
+    /// Identify R, L, k, f, J, Ts from a high- and a low-voltage step record (or Ts from steady tests).
+    Identify(IdentifyArgs),
     /// Run the paper's example end to end and compare with its printed tables.
     Demo(DemoArgs),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum MethodArg {
+    /// The paper's method: fit of Eq. (33), then Eqs. (34)-(51).
+    Paper,
+    /// All six parameters fitted jointly to both records with the exact model.
+    Full,
+}
+
+#[derive(Debug, Args)]
+pub struct IdentifyArgs {
+    /// High-voltage step record (CSV: t, voltage, current and speed or position).
+    #[arg(long, value_name = "HV.csv", requires = "low")]
+    pub high: Option<PathBuf>,
+    /// Low-voltage step record, where Coulomb friction shows.
+    #[arg(long, value_name = "LV.csv", requires = "high")]
+    pub low: Option<PathBuf>,
+    /// Identification method.
+    #[arg(long, value_enum, default_value = "full")]
+    pub method: MethodArg,
+    /// Steady-state records at several voltages: fit the apparent-resistance law (8), Ts by (9).
+    #[arg(long, value_name = "FILE.csv", num_args = 1.., conflicts_with_all = ["high", "low"])]
+    pub steady: Vec<PathBuf>,
+    /// Known armature resistance R [ohm] for --steady (Sec. 2.2 assumes it known).
+    #[arg(long, value_name = "OHM", requires = "steady")]
+    pub resistance: Option<f64>,
+    /// Known torque constant k [N·m/A] for --steady.
+    #[arg(long, value_name = "NM_PER_A", requires = "steady")]
+    pub torque_constant: Option<f64>,
+    /// Print one JSON object instead of tables.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Which motor: `paper` (the paper's Sec. 4.1 motor) or a JSON file with keys R, L, k, f, J,

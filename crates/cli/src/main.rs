@@ -1,7 +1,8 @@
 //! `motorid`: identify DC servomotor parameters; simulate, acquire, diagnose.
 //!
 //! `main` is glue: parse the command line, validate it into typed settings, run, and map the
-//! outcome to an exit code (0 success, 2 bad input, 1 anything else).
+//! outcome to an exit code (0 success, 2 bad input, 3 a fit that did not converge, 1 anything
+//! else).
 
 // Doc comments of `args` are the `--help` text, where units read naturally as `[V]`, `[s]`.
 #![allow(rustdoc::broken_intra_doc_links)]
@@ -22,6 +23,20 @@ use args::{Cli, Command};
 const EXIT_BAD_INPUT: u8 = 2;
 /// Exit code for any other failure (I/O while writing, internal errors).
 const EXIT_FAILURE: u8 = 1;
+/// Exit code for a fit that ran but did not converge (its results are still printed).
+const EXIT_NOT_CONVERGED: u8 = 3;
+
+/// Marks a fit that did not converge, for the exit code.
+#[derive(Debug)]
+pub struct NotConverged(pub String);
+
+impl std::fmt::Display for NotConverged {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for NotConverged {}
 
 /// Marks an error as the user's input to fix, for the exit code.
 #[derive(Debug)]
@@ -40,6 +55,7 @@ fn main() -> ExitCode {
     let outcome = match cli.command {
         Command::Model(a) => commands::model::run(&a),
         Command::Simulate(a) => commands::simulate::run(&a),
+        Command::Identify(a) => commands::identify::run(&a),
         Command::Demo(a) => commands::demo::run(&a),
     };
     match outcome {
@@ -48,6 +64,8 @@ fn main() -> ExitCode {
             eprintln!("error: {err:#}");
             if err.chain().any(|e| e.is::<BadInput>()) {
                 ExitCode::from(EXIT_BAD_INPUT)
+            } else if err.chain().any(|e| e.is::<NotConverged>()) {
+                ExitCode::from(EXIT_NOT_CONVERGED)
             } else {
                 ExitCode::from(EXIT_FAILURE)
             }

@@ -1,4 +1,5 @@
-//! Writing records in the CSV contract of SPEC section 4, atomically.
+//! Records in the CSV contract of SPEC section 4: reading them with errors that name the file
+//! and line, and writing them atomically.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -6,6 +7,133 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use motor_model::Record;
+
+use crate::BadInput;
+
+/// Columns of a record as read from a file, SI units.
+#[derive(Debug, Clone, Default)]
+pub struct RecordColumns {
+    /// `t` \[s\].
+    pub t: Vec<f64>,
+    /// `voltage` \[V\].
+    pub voltage: Vec<f64>,
+    /// `current` \[A\].
+    pub current: Vec<f64>,
+    /// `speed` \[rad/s\], if present.
+    pub speed: Option<Vec<f64>>,
+    /// `position` \[rad\], if present.
+    pub position: Option<Vec<f64>>,
+}
+
+/// Reads a record file. Every problem is a [`BadInput`] naming the file, the line and the value.
+pub fn read_file(path: &Path) -> Result<RecordColumns> {
+    let shown = path.display();
+    let bytes = std::fs::read(path).map_err(|e| BadInput(format!("{shown}: cannot read ({e})")))?;
+    let text = String::from_utf8(bytes).map_err(|e| {
+        BadInput(format!(
+            "{shown}: not UTF-8 text (invalid byte at offset {}): is this a CSV record?",
+            e.utf8_error().valid_up_to()
+        ))
+    })?;
+    parse(&text).map_err(|(line, msg)| BadInput(format!("{shown}:{line}: {msg}")).into())
+}
+
+/// Parses record text; errors carry the 1-based line number.
+fn parse(text: &str) -> std::result::Result<RecordColumns, (usize, String)> {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.trim_end_matches('\r')));
+    let (header_line, header) = lines
+        .by_ref()
+        .find(|(_, l)| !l.trim().is_empty() && !l.starts_with('#'))
+        .ok_or((
+            1,
+            "no header row: expected a line such as t,voltage,current,speed,position".to_string(),
+        ))?;
+    let names: Vec<&str> = header.split(',').map(str::trim).collect();
+    let find = |name: &str| names.iter().position(|n| *n == name);
+    for (i, name) in names.iter().enumerate() {
+        if names[..i].contains(name) {
+            return Err((
+                header_line,
+                format!("column `{name}` appears twice in the header"),
+            ));
+        }
+        if !["t", "voltage", "current", "speed", "position"].contains(name) {
+            return Err((header_line, format!("unknown column `{name}`: expected t, voltage, current and optionally speed, position")));
+        }
+    }
+    let required = |name: &str| {
+        find(name).ok_or((header_line, format!("no `{name}` column in the header `{header}`: a record needs t, voltage and current")))
+    };
+    let (it, iv, ic) = (required("t")?, required("voltage")?, required("current")?);
+    let (is, ip) = (find("speed"), find("position"));
+    let mut cols = RecordColumns {
+        speed: is.map(|_| Vec::new()),
+        position: ip.map(|_| Vec::new()),
+        ..RecordColumns::default()
+    };
+    let mut values = Vec::with_capacity(names.len());
+    let mut last_t = f64::NEG_INFINITY;
+    for (line_no, line) in lines {
+        if line.trim().is_empty() || line.starts_with('#') {
+            continue;
+        }
+        values.clear();
+        for (k, field) in line.split(',').enumerate() {
+            let name = names.get(k).ok_or((
+                line_no,
+                format!(
+                    "{} fields where the header has {}",
+                    line.split(',').count(),
+                    names.len()
+                ),
+            ))?;
+            let v: f64 = field.trim().parse().map_err(|_| {
+                (
+                    line_no,
+                    format!("column `{name}`: `{}` is not a number", field.trim()),
+                )
+            })?;
+            if !v.is_finite() {
+                return Err((
+                    line_no,
+                    format!("column `{name}` is {v}: every value must be finite"),
+                ));
+            }
+            values.push(v);
+        }
+        if values.len() != names.len() {
+            return Err((
+                line_no,
+                format!(
+                    "{} fields where the header has {} (a line cut short?)",
+                    values.len(),
+                    names.len()
+                ),
+            ));
+        }
+        if values[it] <= last_t {
+            return Err((line_no, format!("t = {} s does not come after the previous t = {last_t} s: time must increase strictly", values[it])));
+        }
+        last_t = values[it];
+        cols.t.push(values[it]);
+        cols.voltage.push(values[iv]);
+        cols.current.push(values[ic]);
+        if let (Some(i), Some(c)) = (is, cols.speed.as_mut()) {
+            c.push(values[i]);
+        }
+        if let (Some(i), Some(c)) = (ip, cols.position.as_mut()) {
+            c.push(values[i]);
+        }
+    }
+    if cols.t.is_empty() {
+        return Err((header_line, "no data rows after the header".into()));
+    }
+    Ok(cols)
+}
 
 /// Writes `record` as CSV with `#` metadata lines to `out`.
 pub fn write_to(

@@ -25,18 +25,26 @@
 #![warn(missing_docs)]
 
 mod error;
+mod full_model;
 mod lm;
 mod model33;
 mod paper_method;
 mod stats;
+mod steady_fit;
+mod step_location;
 
 pub use error::FitError;
+pub use full_model::{
+    identify_full, noise_std, Channel, ChannelQuality, FullFit, StepTest, PARAM_NAMES, PARAM_UNITS,
+};
 pub use lm::{
     solve, LeastSquares, LevenbergMarquardt, LmReport, LmSettings, NormalEquations, Termination,
 };
 pub use model33::{fit_33, Fit33, Params33, Record33};
 pub use paper_method::{
-    from_high_voltage, suggested_low_voltage_45, tau_m_as_printed_37, with_low_voltage,
-    HighVoltageResult, TwoTestFriction,
+    from_high_voltage, identify_paper, suggested_low_voltage_45, tau_m_as_printed_37,
+    with_low_voltage, HighVoltageResult, PaperIdentification, TwoTestFriction,
 };
 pub use stats::{student_t_quantile, uncertainty, Uncertainty};
+pub use steady_fit::{fit_apparent_resistance, SteadyFit};
+pub use step_location::{locate_step, StepLocation};

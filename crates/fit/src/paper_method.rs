@@ -184,3 +184,90 @@ pub fn with_low_voltage(
 pub fn suggested_low_voltage_45(r_c: f64, k_c: f64, f_c: f64) -> f64 {
     0.5 * (r_c / k_c + k_c / f_c)
 }
+
+/// The paper's whole method on a high- and a low-voltage step test.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PaperIdentification {
+    /// Fit of Eq. (33) (Table 3).
+    pub fit_33: crate::model33::Fit33,
+    /// Eqs. (34)–(44) (Table 4).
+    pub high: HighVoltageResult,
+    /// Eqs. (46)–(51): Ts and refined gains.
+    pub low: TwoTestFriction,
+    /// The motor: R, L, k, f, J of (38)–(43) with Ts of (48).
+    pub params: motor_model::MotorParams,
+    /// `Irm`, `Ωrm`, `Irb` used \[A, rad/s, A\]: the last samples of the records, as the paper
+    /// took its Table 2 at t = 50 s.
+    pub steady_values: [f64; 3],
+}
+
+/// Runs the paper's method: normalise the high-voltage current by its last sample, fit (33)
+/// (from the paper's start β0 = [1; 1; 1], Appendix A), apply (34)–(44) with the last speed
+/// sample as Ωrm, then (46)–(51) with the low-voltage test's last current sample.
+pub fn identify_paper(
+    high: &crate::full_model::StepTest<'_>,
+    low: &crate::full_model::StepTest<'_>,
+    settings: crate::lm::LmSettings,
+) -> Result<PaperIdentification, FitError> {
+    let bad = |series: &str, reason: String| FitError::BadData {
+        series: series.into(),
+        reason,
+    };
+    let (Some(&i_rm), Some(&i_rb)) = (high.current.last(), low.current.last()) else {
+        return Err(bad("step tests", "a record has no samples".into()));
+    };
+    let speed = high.speed.ok_or_else(|| {
+        bad(
+            "high-voltage speed",
+            "the paper's method needs the steady speed Ωrm (Eq. (40)): give a speed or position channel".into(),
+        )
+    })?;
+    let omega_rm = speed.last().copied().unwrap_or(f64::NAN);
+    if !(i_rm.is_finite() && i_rm > 0.0) {
+        return Err(bad(
+            "high-voltage current",
+            format!("final current {i_rm} A: expected a positive steady current"),
+        ));
+    }
+    let y: Vec<f64> = high.current.iter().map(|c| c / i_rm).collect();
+    let record = crate::model33::Record33 {
+        t_first: high.t_first,
+        dt: high.dt,
+        normalized_current: &y,
+    };
+    let start = Params33 {
+        alpha: 1.0,
+        sigma: 1.0,
+        omega_a: 1.0,
+    };
+    let fit = crate::model33::fit_33(&record, start, settings)?;
+    if !fit.report.termination.converged() {
+        return Err(domain(
+            "Eq. (33) fit",
+            format!(
+                "the fit did not converge ({}; residual ½‖r‖² = {:.3e} after {} iterations)",
+                fit.report.termination.text(),
+                fit.report.normal.cost,
+                fit.report.iterations
+            ),
+        ));
+    }
+    let hv = from_high_voltage(fit.params, high.volts, i_rm, omega_rm)?;
+    let lv = with_low_voltage(hv.r_ohm, hv.k_nm_per_a, high.volts, i_rm, low.volts, i_rb)?;
+    let params = motor_model::MotorParams::new(
+        hv.r_ohm,
+        hv.l_henry,
+        hv.k_nm_per_a,
+        hv.f_nms_per_rad,
+        hv.j_kgm2,
+        lv.ts_nm,
+    )
+    .map_err(|e| domain("Eqs. (38)-(48)", e.to_string()))?;
+    Ok(PaperIdentification {
+        fit_33: fit,
+        high: hv,
+        low: lv,
+        params,
+        steady_values: [i_rm, omega_rm, i_rb],
+    })
+}

@@ -281,9 +281,17 @@ impl<T: Real> StepResponse<T> {
         }
     }
 
-    /// Walks the grid `t_i = t_first + i·dt`, calling `emit(i, state)` for each of `n` samples.
+    /// Walks the grid `t_i = t_first + i·dt` \[s\], calling `emit(i, state)` for each of `n`
+    /// samples in order: the streaming form of [`StepResponse::fill`], for callers that reduce
+    /// the response as they go (no buffer at all).
     #[inline(always)]
-    fn walk(&self, t_first: f64, dt: f64, n: usize, mut emit: impl FnMut(usize, MotorState<T>)) {
+    pub fn for_each_sample(
+        &self,
+        t_first: f64,
+        dt: f64,
+        n: usize,
+        mut emit: impl FnMut(usize, MotorState<T>),
+    ) {
         let t_of = |i: usize| t_first + i as f64 * dt;
         let Some(t0) = self.t0 else {
             for i in 0..n {
@@ -323,7 +331,7 @@ impl<T: Real> StepResponse<T> {
     /// Fills `out[i]` with the state at `t_first + i·dt` \[s\]. No allocation.
     pub fn fill(&self, t_first: f64, dt: f64, out: &mut [MotorState<T>]) {
         let n = out.len();
-        self.walk(t_first, dt, n, |i, s| {
+        self.for_each_sample(t_first, dt, n, |i, s| {
             if let Some(slot) = out.get_mut(i) {
                 *slot = s;
             }
@@ -333,7 +341,7 @@ impl<T: Real> StepResponse<T> {
     /// Fills `out[i]` with the current \[A\] at `t_first + i·dt` \[s\]. No allocation.
     pub fn fill_current(&self, t_first: f64, dt: f64, out: &mut [T]) {
         let n = out.len();
-        self.walk(t_first, dt, n, |i, s| {
+        self.for_each_sample(t_first, dt, n, |i, s| {
             if let Some(slot) = out.get_mut(i) {
                 *slot = s.current_a;
             }

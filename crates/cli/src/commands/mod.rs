@@ -1,3 +1,4 @@
 pub mod demo;
+pub mod identify;
 pub mod model;
 pub mod simulate;

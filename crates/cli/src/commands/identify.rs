@@ -1,0 +1,285 @@
+//! `motorid identify`: motor parameters from step records (or Ts from steady tests).
+
+use std::path::Path;
+
+use anyhow::Result;
+use fit::{
+    fit_apparent_resistance, identify_full, identify_paper, locate_step, FullFit, LmSettings,
+    PaperIdentification, StepTest, PARAM_NAMES, PARAM_UNITS,
+};
+use motor_model::{central_difference, Derived, MotorParams};
+use serde_json::{json, Value};
+
+use crate::args::{IdentifyArgs, MethodArg};
+use crate::record_csv::{read_file, RecordColumns};
+use crate::{BadInput, NotConverged};
+
+/// A 95 % interval wider than this fraction of the value marks a poorly determined parameter.
+const POORLY_DETERMINED: f64 = 0.1;
+
+/// A step record read and located: owns the columns the [`StepTest`] borrows.
+pub struct LoadedStep {
+    /// File it came from.
+    pub path: String,
+    volts: f64,
+    dt: f64,
+    current: Vec<f64>,
+    speed: Option<Vec<f64>>,
+}
+
+impl LoadedStep {
+    /// The identification's view of the record.
+    pub fn test(&self) -> StepTest<'_> {
+        StepTest {
+            volts: self.volts,
+            t_first: 0.0,
+            dt: self.dt,
+            current: &self.current,
+            speed: self.speed.as_deref(),
+            position: None,
+        }
+    }
+}
+
+/// Reads `path`, finds the step and keeps the samples from it on. Speed comes from the `speed`
+/// column, or from the `position` column by central differences.
+pub fn load_step(path: &Path) -> Result<LoadedStep> {
+    let cols: RecordColumns = read_file(path)?;
+    let shown = path.display().to_string();
+    let loc = locate_step(&cols.t, &cols.voltage).map_err(|e| BadInput(format!("{shown}: {e}")))?;
+    let from = loc.index;
+    let speed = match (&cols.speed, &cols.position) {
+        (Some(s), _) => Some(s[from..].to_vec()),
+        (None, Some(p)) => Some(central_difference(&cols.t, p)[from..].to_vec()),
+        (None, None) => None,
+    };
+    Ok(LoadedStep {
+        path: shown,
+        volts: loc.volts,
+        dt: loc.dt,
+        current: cols.current[from..].to_vec(),
+        speed,
+    })
+}
+
+fn values(p: &MotorParams) -> [f64; 6] {
+    [
+        p.r_ohm,
+        p.l_henry,
+        p.k_nm_per_a,
+        p.f_nms_per_rad,
+        p.j_kgm2,
+        p.ts_nm,
+    ]
+}
+
+fn paper_json(paper: &PaperIdentification) -> Value {
+    let h = &paper.high;
+    json!({
+        "table3": {"alpha": paper.fit_33.params.alpha, "sigma": paper.fit_33.params.sigma, "wa": paper.fit_33.params.omega_a,
+                   "iterations": paper.fit_33.report.iterations, "termination": paper.fit_33.report.termination.text()},
+        "table4": {"wn": h.omega_n, "zeta": h.zeta, "tau_m": h.tau_m, "L": h.l_henry, "R": h.r_ohm, "k": h.k_nm_per_a,
+                   "f": h.f_nms_per_rad, "J": h.j_kgm2, "Ks": h.k_s, "KE": h.k_e},
+        "eq48_Ts": paper.low.ts_nm,
+        "eq50_KE": paper.low.k_e,
+        "eq51_Ks": paper.low.k_s,
+        "steady_values": {"Irm": paper.steady_values[0], "Wrm": paper.steady_values[1], "Irb": paper.steady_values[2]},
+    })
+}
+
+/// The JSON report: parameters with 95 % CIs and units, derived constants, fit quality.
+pub fn report_json(
+    method: MethodArg,
+    paper: &PaperIdentification,
+    full: Option<&FullFit>,
+    files: [&str; 2],
+) -> Value {
+    let params = full.map_or(paper.params, |f| f.params);
+    let v = values(&params);
+    let mut parameters = serde_json::Map::new();
+    for i in 0..6 {
+        let ci = full.and_then(|f| f.ci95).map(|c| json!(c[i]));
+        parameters.insert(
+            PARAM_NAMES[i].into(),
+            json!({"value": v[i], "ci95": ci, "unit": PARAM_UNITS[i]}),
+        );
+    }
+    let quality = match full {
+        Some(f) => json!({
+            "termination": f.termination.text(),
+            "converged": f.termination.converged(),
+            "iterations": f.iterations,
+            "weighted_cost": f.cost,
+            "channels": f.quality.iter().map(|q| json!({
+                "record": files[q.test], "channel": q.channel.name(), "rms_residual": q.rms_residual,
+                "nrmse_fit_percent": q.nrmse_fit_percent, "noise_std": q.noise_std,
+            })).collect::<Vec<_>>(),
+        }),
+        None => json!({
+            "termination": paper.fit_33.report.termination.text(),
+            "converged": paper.fit_33.report.termination.converged(),
+            "iterations": paper.fit_33.report.iterations,
+            "eq33_residual_rms": (2.0 * paper.fit_33.report.normal.cost / paper.fit_33.report.normal.n_residuals as f64).sqrt(),
+        }),
+    };
+    json!({
+        "method": match method { MethodArg::Paper => "paper", MethodArg::Full => "full" },
+        "parameters": parameters,
+        "derived": serde_json::to_value(Derived::new(&params)).unwrap_or(Value::Null),
+        "quality": quality,
+        "paper_method": paper_json(paper),
+    })
+}
+
+fn print_table(
+    method: MethodArg,
+    paper: &PaperIdentification,
+    full: Option<&FullFit>,
+    files: [&str; 2],
+) {
+    let params = full.map_or(paper.params, |f| f.params);
+    let v = values(&params);
+    match method {
+        MethodArg::Full => println!("full model: R, L, k, f, J, Ts fitted jointly to both records (exact response, breakaway included)"),
+        MethodArg::Paper => println!("paper method: fit of Eq. (33), then Eqs. (34)-(51)"),
+    }
+    println!("  {:<3} {:>14}   {:<31} {}", "", "value", "95% CI", "unit");
+    let mut poorly = Vec::new();
+    for i in 0..6 {
+        let ci = full.and_then(|f| f.ci95).map(|c| c[i]);
+        let ci_text = ci.map_or(
+            "(none: the paper's method gives no CI)".to_string(),
+            |[lo, hi]| format!("[{lo:.6e}, {hi:.6e}]"),
+        );
+        if let Some([lo, hi]) = ci {
+            let rel = 0.5 * (hi - lo) / v[i];
+            if rel > POORLY_DETERMINED {
+                poorly.push(format!("{} (±{:.0} %)", PARAM_NAMES[i], 100.0 * rel));
+            }
+        }
+        println!(
+            "  {:<3} {:>14.6e}   {:<31} {}",
+            PARAM_NAMES[i], v[i], ci_text, PARAM_UNITS[i]
+        );
+    }
+    let d = Derived::new(&params);
+    println!(
+        "derived: KE = {:.6} A/V, Ks = {:.6} A/(N·m), tau_e = {:.6} s, tau_m = {:.6} s, wn = {:.6} rad/s, zeta = {:.6}",
+        d.k_e, d.k_s, d.tau_e, d.tau_m, d.omega_n, d.zeta
+    );
+    match full {
+        Some(f) => {
+            println!("fit: {} after {} iterations", f.termination.text(), f.iterations);
+            for q in &f.quality {
+                println!(
+                    "  {} {}: residual RMS {:.3e}, fit {:.3} %, noise {:.3e}",
+                    files[q.test], q.channel.name(), q.rms_residual, q.nrmse_fit_percent, q.noise_std
+                );
+            }
+        }
+        None => println!(
+            "Eq. (33) fit: alpha = {:.6}, sigma = {:.6} 1/s, wa = {:.6} rad/s; {} after {} iterations",
+            paper.fit_33.params.alpha, paper.fit_33.params.sigma, paper.fit_33.params.omega_a,
+            paper.fit_33.report.termination.text(), paper.fit_33.report.iterations
+        ),
+    }
+    if !poorly.is_empty() {
+        println!(
+            "warning: poorly determined by these records: {} — the 95% interval is wider than {:.0} % of the value",
+            poorly.join(", "),
+            100.0 * POORLY_DETERMINED
+        );
+    }
+}
+
+fn run_steady(a: &IdentifyArgs) -> Result<()> {
+    let (Some(r), Some(k)) = (a.resistance, a.torque_constant) else {
+        return Err(BadInput("--steady needs --resistance OHM and --torque-constant NM_PER_A: Sec. 2.2 assumes R and k known".into()).into());
+    };
+    let mut tests = Vec::new();
+    for path in &a.steady {
+        let cols = read_file(path)?;
+        // Steady values: medians of the last tenth of the record.
+        let tail = |v: &[f64]| {
+            let mut t = v[v.len() - (v.len() / 10).max(1)..].to_vec();
+            let mid = t.len() / 2;
+            *t.select_nth_unstable_by(mid, f64::total_cmp).1
+        };
+        tests.push((tail(&cols.voltage), tail(&cols.current)));
+    }
+    let fit = fit_apparent_resistance(&tests, r, k).map_err(|e| BadInput(e.to_string()))?;
+    if a.json {
+        let report = json!({
+            "method": "steady",
+            "a_ohm": fit.a_ohm, "b_ohm_a": fit.b_ohm_a, "ci95": fit.ci95,
+            "parameters": {"Ts": {"value": fit.ts_nm, "unit": "N·m"}},
+            "points": fit.points.iter().map(|(i, dr)| json!({"Ir": i, "deltaR": dr})).collect::<Vec<_>>(),
+            "termination": fit.termination.text(),
+        });
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        println!(
+            "apparent resistance, Eq. (8): dR = a - b/Ir over {} tests",
+            tests.len()
+        );
+        for ((path, (e, ir)), (_, dr)) in a.steady.iter().zip(&tests).zip(&fit.points) {
+            println!(
+                "  {}: E = {e:.6} V, Ir = {ir:.6} A, dR = {dr:.6} ohm",
+                path.display()
+            );
+        }
+        println!(
+            "  a = {:.6} ohm, b = {:.6} ohm·A ({})",
+            fit.a_ohm,
+            fit.b_ohm_a,
+            fit.termination.text()
+        );
+        println!("Ts = k b / a = {:.6} N·m  (Eq. (9))", fit.ts_nm);
+    }
+    Ok(())
+}
+
+pub fn run(a: &IdentifyArgs) -> Result<()> {
+    if !a.steady.is_empty() {
+        return run_steady(a);
+    }
+    let (Some(high), Some(low)) = (&a.high, &a.low) else {
+        return Err(BadInput(
+            "give --high HV.csv --low LV.csv (step records), or --steady FILE.csv ...".into(),
+        )
+        .into());
+    };
+    let (hv, lv) = (load_step(high)?, load_step(low)?);
+    let files = [hv.path.as_str(), lv.path.as_str()];
+    let tests = [hv.test(), lv.test()];
+    let settings = LmSettings::default();
+    let paper = identify_paper(&tests[0], &tests[1], settings)
+        .map_err(|e| BadInput(format!("{} / {}: {e}", files[0], files[1])))?;
+    let full = match a.method {
+        MethodArg::Paper => None,
+        MethodArg::Full => Some(
+            identify_full(&tests, &paper.params, settings)
+                .map_err(|e| BadInput(format!("{} / {}: {e}", files[0], files[1])))?,
+        ),
+    };
+    if a.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&report_json(a.method, &paper, full.as_ref(), files))?
+        );
+    } else {
+        print_table(a.method, &paper, full.as_ref(), files);
+    }
+    if let Some(f) = &full {
+        if !f.termination.converged() {
+            return Err(NotConverged(format!(
+                "the full fit did not converge ({} after {} iterations; weighted cost {:.3e})",
+                f.termination.text(),
+                f.iterations,
+                f.cost
+            ))
+            .into());
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,374 @@
+//! Full-model identification: R, L, k, f, J and Ts fitted jointly to whole step records.
+//!
+//! The model is the exact response of `motor-model` (Eq. (10) to the breakaway instant (11),
+//! then the solution of (2)) for each record's measured step voltage — no approximation (32),
+//! no steady-state assumption, breakaway included. Residuals are
+//! `(model − measured)/σ_channel` over every sample of every channel given (current, and speed
+//! and/or angle), each channel weighted by its own noise level, estimated from the record
+//! ([`noise_std`]). Parameters are fitted as `θ = ln p` (all stay positive); the Jacobian is exact,
+//! by forward-mode dual numbers through the same code that computes the response.
+
+use motor_model::{Dual, MotorParams, MotorState, Real, StepResponse};
+use nalgebra::{DMatrix, DVector};
+
+use crate::error::FitError;
+use crate::lm::{solve, LeastSquares, LmSettings, NormalEquations, Termination};
+use crate::stats::uncertainty;
+
+/// Names of the six parameters, in the order of every array here.
+pub const PARAM_NAMES: [&str; 6] = ["R", "L", "k", "f", "J", "Ts"];
+/// Their SI units.
+pub const PARAM_UNITS: [&str; 6] = ["ohm", "H", "N·m/A", "N·m·s/rad", "kg·m²", "N·m"];
+
+/// One step test as the identification sees it: a uniform grid starting at the step.
+#[derive(Debug, Clone, Copy)]
+pub struct StepTest<'a> {
+    /// Step voltage E \[V\] (measured, after the step).
+    pub volts: f64,
+    /// Time of the first sample after the step instant \[s\] (≥ 0).
+    pub t_first: f64,
+    /// Sample period \[s\].
+    pub dt: f64,
+    /// Armature current \[A\].
+    pub current: &'a [f64],
+    /// Speed \[rad/s\], if measured.
+    pub speed: Option<&'a [f64]>,
+    /// Angle since the step \[rad\], if measured.
+    pub position: Option<&'a [f64]>,
+}
+
+/// The measured channels, in a fixed order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Channel {
+    /// Current \[A\].
+    Current,
+    /// Speed \[rad/s\].
+    Speed,
+    /// Angle \[rad\].
+    Position,
+}
+
+impl Channel {
+    /// Lower-case name for reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Channel::Current => "current",
+            Channel::Speed => "speed",
+            Channel::Position => "position",
+        }
+    }
+
+    fn of(self, s: &MotorState<impl Real>) -> f64 {
+        match self {
+            Channel::Current => s.current_a.value(),
+            Channel::Speed => s.speed_rad_s.value(),
+            Channel::Position => s.position_rad.value(),
+        }
+    }
+}
+
+/// Fit quality of one channel of one test.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChannelQuality {
+    /// Index of the test in the input.
+    pub test: usize,
+    /// Which channel.
+    pub channel: Channel,
+    /// Noise standard deviation estimated from the record, used as the channel's weight
+    /// (unit of the channel).
+    pub noise_std: f64,
+    /// RMS of the residual at the solution (unit of the channel).
+    pub rms_residual: f64,
+    /// Normalised-RMSE fit, `100 (1 − ‖y − ŷ‖/‖y − ȳ‖)` \[%\] (100 = perfect).
+    pub nrmse_fit_percent: f64,
+}
+
+/// Result of the full-model identification.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FullFit {
+    /// The identified motor.
+    pub params: MotorParams,
+    /// Standard errors of R, L, k, f, J, Ts (SI units); `None` if the fit has no
+    /// degrees of freedom or a singular Jacobian (a parameter the data cannot determine).
+    pub std_error: Option<[f64; 6]>,
+    /// 95 % intervals `[lo, hi]` (t distribution, as `nlparci`), SI units.
+    pub ci95: Option<[[f64; 2]; 6]>,
+    /// Correlation matrix of the parameters (6 × 6).
+    pub correlation: Option<DMatrix<f64>>,
+    /// Per-channel fit quality.
+    pub quality: Vec<ChannelQuality>,
+    /// Accepted iterations.
+    pub iterations: u64,
+    /// Why the solver stopped.
+    pub termination: Termination,
+    /// Final weighted cost `½ Σ r²`.
+    pub cost: f64,
+}
+
+/// Fraction of the largest second differences ignored by [`noise_std`] (isolated glitches).
+const NOISE_TRIM: f64 = 0.005;
+
+/// Noise level of a sampled signal: the RMS of its second differences `Δ²y`, largest 0.5 %
+/// dropped, over `√6` (the second difference of white noise has variance 6σ²; a smooth signal
+/// contributes `y'' dt²`, negligible at logger rates). An RMS rather than a median, because
+/// quantisation (ADC, encoder) shows as sparse jumps of one step whose median is 0. Floored at
+/// 1e-9 of the signal's range so that exact data still gives finite weights. Unit of `y`.
+pub fn noise_std(y: &[f64]) -> f64 {
+    let mut d2: Vec<f64> = y
+        .windows(3)
+        .map(|w| (w[2] - 2.0 * w[1] + w[0]).powi(2))
+        .collect();
+    let (lo, hi) = y
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        });
+    let floor = 1e-9 * (hi - lo).abs().max(f64::MIN_POSITIVE);
+    if d2.is_empty() {
+        return floor;
+    }
+    let keep = d2.len() - ((d2.len() as f64 * NOISE_TRIM) as usize).min(d2.len() - 1);
+    d2.select_nth_unstable_by(keep - 1, f64::total_cmp);
+    let mean_sq = d2[..keep].iter().sum::<f64>() / keep as f64;
+    (mean_sq.sqrt() / 6f64.sqrt()).max(floor)
+}
+
+struct Weighted<'a> {
+    test: StepTest<'a>,
+    channels: Vec<(Channel, &'a [f64], f64)>,
+}
+
+struct FullProblem<'a> {
+    tests: Vec<Weighted<'a>>,
+    n_residuals: usize,
+}
+
+fn params_of<T: Real>(theta: &[f64], make: impl Fn(f64, usize) -> T) -> Option<[T; 6]> {
+    if theta.len() != 6 || theta.iter().any(|t| !t.is_finite() || t.abs() > 700.0) {
+        return None;
+    }
+    Some(std::array::from_fn(|i| make(theta[i], i).exp()))
+}
+
+impl FullProblem<'_> {
+    /// Streams every residual of every channel at `theta`, with the model sample.
+    fn for_each<T: Real>(
+        &self,
+        params: [T; 6],
+        mut visit: impl FnMut(&MotorState<T>, Channel, f64, f64),
+    ) {
+        for w in &self.tests {
+            let response = StepResponse::from_values(params, w.test.volts);
+            let n = w.test.current.len();
+            response.for_each_sample(w.test.t_first, w.test.dt, n, |i, s| {
+                for &(channel, data, sigma) in &w.channels {
+                    if let Some(&y) = data.get(i) {
+                        visit(&s, channel, y, sigma);
+                    }
+                }
+            });
+        }
+    }
+}
+
+impl LeastSquares for FullProblem<'_> {
+    fn n_params(&self) -> usize {
+        6
+    }
+
+    fn cost(&self, theta: &[f64]) -> Option<f64> {
+        let params = params_of::<f64>(theta, |v, _| v)?;
+        let mut cost = 0.0;
+        self.for_each(params, |s, ch, y, sigma| {
+            let r = (ch.of(s) - y) / sigma;
+            cost += r * r;
+        });
+        cost.is_finite().then_some(0.5 * cost)
+    }
+
+    fn normal_equations(&self, theta: &[f64]) -> Option<NormalEquations> {
+        let params = params_of::<Dual<6>>(theta, Dual::variable)?;
+        let mut jtj = [[0.0; 6]; 6];
+        let mut jtr = [0.0; 6];
+        let mut cost = 0.0;
+        self.for_each(params, |s, ch, y, sigma| {
+            let m = match ch {
+                Channel::Current => s.current_a,
+                Channel::Speed => s.speed_rad_s,
+                Channel::Position => s.position_rad,
+            };
+            let inv = 1.0 / sigma;
+            let r = (m.v - y) * inv;
+            let g = m.d.map(|d| d * inv);
+            cost += r * r;
+            for a in 0..6 {
+                jtr[a] += g[a] * r;
+                for b in a..6 {
+                    jtj[a][b] += g[a] * g[b];
+                }
+            }
+        });
+        let m = DMatrix::from_fn(6, 6, |a, b| if a <= b { jtj[a][b] } else { jtj[b][a] });
+        Some(NormalEquations {
+            jtj: m,
+            jtr: DVector::from_row_slice(&jtr),
+            cost: 0.5 * cost,
+            n_residuals: self.n_residuals,
+        })
+    }
+}
+
+fn check_series(name: String, y: &[f64], n: usize) -> Result<(), FitError> {
+    if y.len() != n {
+        return Err(FitError::BadData {
+            series: name,
+            reason: format!(
+                "{} samples where the current has {n}: the channels must align",
+                y.len()
+            ),
+        });
+    }
+    if let Some((i, v)) = y.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(FitError::BadData {
+            series: name,
+            reason: format!("sample {i} is {v}: remove or repair it"),
+        });
+    }
+    Ok(())
+}
+
+/// Identifies R, L, k, f, J, Ts from `tests` (at least one; the paper uses a high- and a
+/// low-voltage step), starting from `start` (e.g. the paper method's result).
+pub fn identify_full(
+    tests: &[StepTest<'_>],
+    start: &MotorParams,
+    settings: LmSettings,
+) -> Result<FullFit, FitError> {
+    start.validate().map_err(|e| FitError::BadData {
+        series: "start parameters".into(),
+        reason: e.to_string(),
+    })?;
+    if start.ts_nm <= 0.0 {
+        return Err(FitError::BadData {
+            series: "start parameters".into(),
+            reason: "Ts = 0: the full model fits ln Ts and needs a positive start".into(),
+        });
+    }
+    if tests.is_empty() {
+        return Err(FitError::BadData {
+            series: "step tests".into(),
+            reason: "no test given".into(),
+        });
+    }
+    let mut weighted = Vec::new();
+    let mut n_residuals = 0;
+    for (k, t) in tests.iter().enumerate() {
+        let label = |ch: &str| format!("test {} {ch}", k + 1);
+        let n = t.current.len();
+        if n < 8 {
+            return Err(FitError::BadData {
+                series: label("current"),
+                reason: format!("{n} samples: at least 8 are needed"),
+            });
+        }
+        if !(t.dt.is_finite() && t.dt > 0.0 && t.t_first.is_finite() && t.t_first >= 0.0) {
+            return Err(FitError::BadData {
+                series: label("time"),
+                reason: format!("first sample {} s after the step, period {} s: expected t_first ≥ 0 and a positive period", t.t_first, t.dt),
+            });
+        }
+        if !(t.volts.is_finite() && t.volts != 0.0) {
+            return Err(FitError::BadData {
+                series: label("voltage"),
+                reason: format!("step of {} V: expected a non-zero finite step", t.volts),
+            });
+        }
+        let mut channels = Vec::new();
+        for (channel, data) in [
+            (Channel::Current, Some(t.current)),
+            (Channel::Speed, t.speed),
+            (Channel::Position, t.position),
+        ] {
+            if let Some(y) = data {
+                check_series(label(channel.name()), y, n)?;
+                channels.push((channel, y, noise_std(y)));
+                n_residuals += n;
+            }
+        }
+        weighted.push(Weighted { test: *t, channels });
+    }
+    let problem = FullProblem {
+        tests: weighted,
+        n_residuals,
+    };
+    let p = start;
+    let theta0: Vec<f64> = [
+        p.r_ohm,
+        p.l_henry,
+        p.k_nm_per_a,
+        p.f_nms_per_rad,
+        p.j_kgm2,
+        p.ts_nm,
+    ]
+    .iter()
+    .map(|v| v.ln())
+    .collect();
+    let report = solve(&problem, &theta0, settings)?;
+    let values: [f64; 6] = params_of::<f64>(&report.params, |v, _| v)
+        .ok_or_else(|| FitError::Solver("parameters left the representable range".into()))?;
+    let params = MotorParams::new(
+        values[0], values[1], values[2], values[3], values[4], values[5],
+    )
+    .map_err(|e| FitError::Solver(e.to_string()))?;
+    // Delta method: σ_p = p σ_θ (exact at the optimum for a linearised reparametrisation).
+    let unc = uncertainty(&report.normal);
+    let std_error = unc
+        .as_ref()
+        .map(|u| std::array::from_fn(|i| values[i] * u.std_error[i]));
+    let ci95 = unc.as_ref().map(|u| {
+        std::array::from_fn(|i| {
+            let half = values[i] * u.ci95_half_width[i];
+            [values[i] - half, values[i] + half]
+        })
+    });
+    let quality = channel_quality(&problem, values);
+    Ok(FullFit {
+        params,
+        std_error,
+        ci95,
+        correlation: unc.map(|u| u.correlation),
+        quality,
+        iterations: report.iterations,
+        termination: report.termination,
+        cost: report.normal.cost,
+    })
+}
+
+fn channel_quality(problem: &FullProblem<'_>, values: [f64; 6]) -> Vec<ChannelQuality> {
+    let mut out = Vec::new();
+    for (k, w) in problem.tests.iter().enumerate() {
+        let response = StepResponse::from_values(values, w.test.volts);
+        for &(channel, data, sigma) in &w.channels {
+            let mean = data.iter().sum::<f64>() / data.len() as f64;
+            let (mut sse, mut sst) = (0.0, 0.0);
+            response.for_each_sample(w.test.t_first, w.test.dt, data.len(), |i, s| {
+                if let Some(&y) = data.get(i) {
+                    sse += (channel.of(&s) - y).powi(2);
+                    sst += (y - mean).powi(2);
+                }
+            });
+            out.push(ChannelQuality {
+                test: k,
+                channel,
+                noise_std: sigma,
+                rms_residual: (sse / data.len() as f64).sqrt(),
+                nrmse_fit_percent: if sst > 0.0 {
+                    100.0 * (1.0 - (sse / sst).sqrt())
+                } else {
+                    f64::NAN
+                },
+            });
+        }
+    }
+    out
+}
