@@ -62,6 +62,19 @@ pub fn load_step(path: &Path) -> Result<LoadedStep> {
     })
 }
 
+/// `x` with 7 significant digits, in plain or scientific notation as suits its size.
+fn sig(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return format!("{x}");
+    }
+    let magnitude = x.abs().log10().floor() as i32;
+    if (-4..6).contains(&magnitude) {
+        format!("{:.*}", (6 - magnitude).max(0) as usize, x)
+    } else {
+        format!("{x:.6e}")
+    }
+}
+
 fn values(p: &MotorParams) -> [f64; 6] {
     [
         p.r_ohm,
@@ -141,16 +154,15 @@ fn print_table(
     let v = values(&params);
     match method {
         MethodArg::Full => println!("full model: R, L, k, f, J, Ts fitted jointly to both records (exact response, breakaway included)"),
-        MethodArg::Paper => println!("paper method: fit of Eq. (33), then Eqs. (34)-(51)"),
+        MethodArg::Paper => println!("paper method: fit of Eq. (33), then Eqs. (34)-(51) (the method gives no confidence intervals)"),
     }
-    println!("  {:<3} {:>14}   {:<31} {}", "", "value", "95% CI", "unit");
+    println!("      {:>12}   {:<27} unit", "value", "95% CI");
     let mut poorly = Vec::new();
     for i in 0..6 {
         let ci = full.and_then(|f| f.ci95).map(|c| c[i]);
-        let ci_text = ci.map_or(
-            "(none: the paper's method gives no CI)".to_string(),
-            |[lo, hi]| format!("[{lo:.6e}, {hi:.6e}]"),
-        );
+        let ci_text = ci.map_or("-".to_string(), |[lo, hi]| {
+            format!("[{}, {}]", sig(lo), sig(hi))
+        });
         if let Some([lo, hi]) = ci {
             let rel = 0.5 * (hi - lo) / v[i];
             if rel > POORLY_DETERMINED {
@@ -158,8 +170,11 @@ fn print_table(
             }
         }
         println!(
-            "  {:<3} {:>14.6e}   {:<31} {}",
-            PARAM_NAMES[i], v[i], ci_text, PARAM_UNITS[i]
+            "  {:<3} {:>12}   {:<27} {}",
+            PARAM_NAMES[i],
+            sig(v[i]),
+            ci_text,
+            PARAM_UNITS[i]
         );
     }
     let d = Derived::new(&params);
