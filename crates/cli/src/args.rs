@@ -23,6 +23,44 @@ pub enum Command {
     Identify(IdentifyArgs),
     /// Run the paper's example end to end and compare with its printed tables.
     Demo(DemoArgs),
+    /// Monte Carlo check of the identification: errors and CI coverage over many noisy records.
+    Montecarlo(MontecarloArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct MontecarloArgs {
+    #[command(flatten)]
+    pub motor: MotorArg,
+    /// Number of record pairs (high- and low-voltage step) to simulate and identify.
+    #[arg(long, default_value_t = 200)]
+    pub runs: usize,
+    /// High-voltage step [V].
+    #[arg(long, default_value_t = 40.0)]
+    pub high_voltage: f64,
+    /// Low-voltage step [V].
+    #[arg(long, default_value_t = 2.5)]
+    pub low_voltage: f64,
+    /// Record length [s].
+    #[arg(long, default_value_t = 50.0)]
+    pub duration: f64,
+    /// Sample rate [Hz].
+    #[arg(long, default_value_t = 1000.0)]
+    pub rate: f64,
+    /// ADC resolution [bits].
+    #[arg(long, default_value_t = 10)]
+    pub adc_bits: u8,
+    /// Noise on the analog channels [LSB].
+    #[arg(long, default_value_t = 1.0)]
+    pub noise_lsb: f64,
+    /// Encoder counts per revolution (speed from the encoder, as the paper did).
+    #[arg(long, default_value_t = 2000)]
+    pub encoder_cpr: u32,
+    /// First noise seed; run i uses seeds derived from it.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Print one JSON object instead of the table.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

@@ -57,6 +57,7 @@ fn main() -> ExitCode {
         Command::Simulate(a) => commands::simulate::run(&a),
         Command::Identify(a) => commands::identify::run(&a),
         Command::Demo(a) => commands::demo::run(&a),
+        Command::Montecarlo(a) => commands::montecarlo::run(&a),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

@@ -13,7 +13,7 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::error::FitError;
 use crate::lm::{solve, LeastSquares, LmSettings, NormalEquations, Termination};
-use crate::stats::uncertainty;
+use crate::stats::{newey_west_lags, sandwich_uncertainty};
 
 /// Names of the six parameters, in the order of every array here.
 pub const PARAM_NAMES: [&str; 6] = ["R", "L", "k", "f", "J", "Ts"];
@@ -171,6 +171,53 @@ impl FullProblem<'_> {
     }
 }
 
+impl FullProblem<'_> {
+    /// Newey–West estimate of the covariance of the score `Jᵀr` at `theta`: within each channel
+    /// of each test, `Σᵢ gᵢgᵢᵀ + Σₗ wₗ (gᵢgᵢ₋ₗᵀ + gᵢ₋ₗgᵢᵀ)` with `gᵢ = rᵢ ∂rᵢ/∂θ` and Bartlett
+    /// weights `wₗ = 1 − l/(L+1)`; channels are taken as independent of each other.
+    fn score_covariance(&self, theta: &[f64]) -> Option<DMatrix<f64>> {
+        let params = params_of::<Dual<6>>(theta, Dual::variable)?;
+        let mut s = [[0.0; 6]; 6];
+        for w in &self.tests {
+            let n = w.test.current.len();
+            let lags = newey_west_lags(n);
+            let response = StepResponse::from_values(params, w.test.volts);
+            for &(channel, data, sigma) in &w.channels {
+                // Ring buffer of the last `lags` scores.
+                let mut ring = vec![[0.0; 6]; lags.max(1)];
+                response.for_each_sample(w.test.t_first, w.test.dt, n, |i, st| {
+                    let Some(&y) = data.get(i) else { return };
+                    let m = match channel {
+                        Channel::Current => st.current_a,
+                        Channel::Speed => st.speed_rad_s,
+                        Channel::Position => st.position_rad,
+                    };
+                    let r = (m.v - y) / sigma;
+                    let g = m.d.map(|d| d / sigma * r);
+                    for a in 0..6 {
+                        for b in 0..6 {
+                            s[a][b] += g[a] * g[b];
+                        }
+                    }
+                    for l in 1..=lags.min(i) {
+                        let weight = 1.0 - l as f64 / (lags as f64 + 1.0);
+                        let past = ring[(i - l) % ring.len()];
+                        for a in 0..6 {
+                            for b in 0..6 {
+                                s[a][b] += weight * (g[a] * past[b] + past[a] * g[b]);
+                            }
+                        }
+                    }
+                    let len = ring.len();
+                    ring[i % len] = g;
+                });
+            }
+        }
+        let m = DMatrix::from_fn(6, 6, |a, b| s[a][b]);
+        m.iter().all(|v| v.is_finite()).then_some(m)
+    }
+}
+
 impl LeastSquares for FullProblem<'_> {
     fn n_params(&self) -> usize {
         6
@@ -297,7 +344,7 @@ pub fn identify_full(
         }
         weighted.push(Weighted { test: *t, channels });
     }
-    let problem = FullProblem {
+    let mut problem = FullProblem {
         tests: weighted,
         n_residuals,
     };
@@ -313,15 +360,45 @@ pub fn identify_full(
     .iter()
     .map(|v| v.ln())
     .collect();
-    let report = solve(&problem, &theta0, settings)?;
+    let first = solve(&problem, &theta0, settings)?;
+    // Second stage: weight each channel by its own residual RMS at the first solution, so that
+    // every channel's weighted residuals have unit variance and the pooled variance behind the
+    // intervals describes each of them (feasible generalised least squares). Skipped when the
+    // first stage did not converge or a channel fits exactly (noise-free data).
+    let report = match params_of::<f64>(&first.params, |v, _| v) {
+        Some(values) if first.termination.converged() => {
+            let rms = channel_quality(&problem, values);
+            let mut changed = false;
+            for (w, q) in problem
+                .tests
+                .iter_mut()
+                .flat_map(|w| w.channels.iter_mut())
+                .zip(&rms)
+            {
+                if q.rms_residual > 1e3 * w.2 * f64::EPSILON.sqrt() && q.rms_residual.is_finite() {
+                    w.2 = q.rms_residual;
+                    changed = true;
+                }
+            }
+            if changed {
+                solve(&problem, &first.params, settings)?
+            } else {
+                first
+            }
+        }
+        _ => first,
+    };
     let values: [f64; 6] = params_of::<f64>(&report.params, |v, _| v)
         .ok_or_else(|| FitError::Solver("parameters left the representable range".into()))?;
     let params = MotorParams::new(
         values[0], values[1], values[2], values[3], values[4], values[5],
     )
     .map_err(|e| FitError::Solver(e.to_string()))?;
-    // Delta method: σ_p = p σ_θ (exact at the optimum for a linearised reparametrisation).
-    let unc = uncertainty(&report.normal);
+    // Intervals from the Newey–West sandwich (residuals of logged signals are rarely white),
+    // then the delta method σ_p = p σ_θ back to SI units.
+    let unc = problem
+        .score_covariance(&report.params)
+        .and_then(|s| sandwich_uncertainty(&report.normal, &s));
     let std_error = unc
         .as_ref()
         .map(|u| std::array::from_fn(|i| values[i] * u.std_error[i]));

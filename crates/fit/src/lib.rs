@@ -45,6 +45,8 @@ pub use paper_method::{
     from_high_voltage, identify_paper, suggested_low_voltage_45, tau_m_as_printed_37,
     with_low_voltage, HighVoltageResult, PaperIdentification, TwoTestFriction,
 };
-pub use stats::{student_t_quantile, uncertainty, Uncertainty};
+pub use stats::{
+    newey_west_lags, sandwich_uncertainty, student_t_quantile, uncertainty, Uncertainty,
+};
 pub use steady_fit::{fit_apparent_resistance, SteadyFit};
 pub use step_location::{locate_step, StepLocation};

@@ -49,7 +49,8 @@ pub trait LeastSquares {
 /// Why the solver stopped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Termination {
-    /// Relative cost reduction below `ftol` or relative step below `xtol`.
+    /// Relative cost reduction (achieved by the last step, or predicted for the next one) below
+    /// `ftol`, or relative step below `xtol`.
     Converged,
     /// Gradient `‖Jᵀr‖∞` below `gtol` (an exact fit).
     ZeroGradient,
@@ -249,6 +250,16 @@ impl<P: LeastSquares> Solver<ArgminProblem<'_, P>, LmState> for LevenbergMarquar
         if normal.jtr.amax() <= self.settings.gtol {
             self.stop = Some(Termination::ZeroGradient);
             return Ok((state, None));
+        }
+        // Predicted reduction of the undamped Gauss–Newton step, ½ Jᵀr·(JᵀJ)⁻¹Jᵀr: when the
+        // local quadratic model says less than ftol·C is left to gain, the fit has converged
+        // (MINPACK's test; the actual reduction alone stalls on rounding at a noisy optimum).
+        if let Some(chol) = normal.jtj.clone().cholesky() {
+            let predicted = 0.5 * normal.jtr.dot(&chol.solve(&normal.jtr));
+            if predicted.is_finite() && predicted <= self.settings.ftol * cost {
+                self.stop = Some(Termination::Converged);
+                return Ok((state, None));
+            }
         }
         let diag_max = (0..n).map(|i| normal.jtj[(i, i)]).fold(0.0_f64, f64::max);
         loop {

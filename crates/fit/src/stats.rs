@@ -69,6 +69,62 @@ pub fn uncertainty(normal: &NormalEquations) -> Option<Uncertainty> {
     })
 }
 
+/// Uncertainty from the sandwich `(JᵀJ)⁻¹ S (JᵀJ)⁻¹ · n/(n − p)`, where `S` is a
+/// heteroskedasticity- and autocorrelation-consistent estimate of the covariance of the score
+/// `Jᵀr` (Newey–West). Unlike [`uncertainty`] it stays honest when the residuals are correlated
+/// in time (noise that is not white: quantisation of a slowly moving signal, differentiated
+/// encoder counts, filtering). `normal` gives `JᵀJ` and the residual count.
+pub fn sandwich_uncertainty(
+    normal: &NormalEquations,
+    score_cov: &DMatrix<f64>,
+) -> Option<Uncertainty> {
+    let p = normal.jtj.nrows();
+    let dof = normal.n_residuals.checked_sub(p).filter(|&d| d > 0)?;
+    let d: Vec<f64> = (0..p)
+        .map(|i| {
+            let v = normal.jtj[(i, i)];
+            if v > 0.0 {
+                1.0 / v.sqrt()
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let scaled = DMatrix::from_fn(p, p, |i, j| normal.jtj[(i, j)] * d[i] * d[j]);
+    let inv_scaled = scaled.try_inverse()?;
+    let h_inv = DMatrix::from_fn(p, p, |i, j| inv_scaled[(i, j)] * d[i] * d[j]);
+    let small_sample = normal.n_residuals as f64 / dof as f64;
+    let covariance = (&h_inv * score_cov * &h_inv) * small_sample;
+    let std_error: Vec<f64> = (0..p).map(|i| covariance[(i, i)].max(0.0).sqrt()).collect();
+    if std_error.iter().any(|s| !s.is_finite()) {
+        return None;
+    }
+    let t = student_t_quantile(0.975, dof as f64);
+    let correlation = DMatrix::from_fn(p, p, |i, j| {
+        let den = std_error[i] * std_error[j];
+        if den > 0.0 {
+            covariance[(i, j)] / den
+        } else if i == j {
+            1.0
+        } else {
+            0.0
+        }
+    });
+    Some(Uncertainty {
+        ci95_half_width: std_error.iter().map(|s| t * s).collect(),
+        std_error,
+        covariance,
+        correlation,
+        residual_variance: 2.0 * normal.cost / dof as f64,
+        dof,
+    })
+}
+
+/// Newey–West lag for `n` samples, `⌊4 (n/100)^{2/9}⌋` (Newey & West 1994's rule of thumb).
+pub fn newey_west_lags(n: usize) -> usize {
+    (4.0 * (n as f64 / 100.0).powf(2.0 / 9.0)).floor() as usize
+}
+
 /// The `p`-quantile of Student's t distribution with `nu` degrees of freedom (`0 < p < 1`).
 ///
 /// Bisection on the CDF, `F(t) = 1 − ½ I_{ν/(ν+t²)}(ν/2, ½)` for `t > 0`, with the regularised

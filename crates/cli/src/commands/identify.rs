@@ -41,11 +41,14 @@ impl LoadedStep {
     }
 }
 
-/// Reads `path`, finds the step and keeps the samples from it on. Speed comes from the `speed`
-/// column, or from the `position` column by central differences.
+/// Reads `path`, finds the step and keeps the samples from it on.
 pub fn load_step(path: &Path) -> Result<LoadedStep> {
-    let cols: RecordColumns = read_file(path)?;
-    let shown = path.display().to_string();
+    step_from_columns(path.display().to_string(), read_file(path)?)
+}
+
+/// Finds the step in `cols` (named `shown` in errors) and keeps the samples from it on. Speed
+/// comes from the `speed` column, or from the `position` column by central differences.
+pub fn step_from_columns(shown: String, cols: RecordColumns) -> Result<LoadedStep> {
     let loc = locate_step(&cols.t, &cols.voltage).map_err(|e| BadInput(format!("{shown}: {e}")))?;
     let from = loc.index;
     let speed = match (&cols.speed, &cols.position) {

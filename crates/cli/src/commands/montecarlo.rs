@@ -1,0 +1,194 @@
+//! `motorid montecarlo`: how accurate are the two methods, and are the full method's 95 %
+//! intervals honest? Many noisy record pairs of one motor, identified by both methods.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use anyhow::Result;
+use fit::{identify_full, identify_paper, LmSettings, PARAM_NAMES};
+use motor_model::{MotorParams, StepResponse};
+use serde_json::json;
+
+use crate::args::{MeasurementArgs, MontecarloArgs, SpeedFromArg};
+use crate::commands::identify::{step_from_columns, LoadedStep};
+use crate::record_csv::RecordColumns;
+use crate::settings;
+use crate::BadInput;
+
+/// Outcome of one record pair.
+struct Run {
+    paper_error: [f64; 6],
+    full_error: [f64; 6],
+    covered: Option<[bool; 6]>,
+    converged: bool,
+}
+
+fn values(p: &MotorParams) -> [f64; 6] {
+    [
+        p.r_ohm,
+        p.l_henry,
+        p.k_nm_per_a,
+        p.f_nms_per_rad,
+        p.j_kgm2,
+        p.ts_nm,
+    ]
+}
+
+fn record(a: &MontecarloArgs, motor: &MotorParams, volts: f64, seed: u64) -> Result<LoadedStep> {
+    let trace = StepResponse::new(motor, volts)
+        .trace(0.0, a.duration, a.rate)
+        .map_err(|e| BadInput(e.to_string()))?;
+    let m = MeasurementArgs {
+        adc_bits: Some(a.adc_bits),
+        range_voltage: None,
+        range_current: None,
+        range_speed: None,
+        noise_lsb: Some(a.noise_lsb),
+        encoder_cpr: Some(a.encoder_cpr),
+        speed_from: SpeedFromArg::Encoder,
+        seed,
+    };
+    let rec = settings::measurement(&m, &trace)?
+        .apply(&trace)
+        .map_err(|e| BadInput(e.to_string()))?;
+    step_from_columns(
+        format!("simulated {volts} V record (seed {seed})"),
+        RecordColumns {
+            t: rec.t,
+            voltage: rec.voltage,
+            current: rec.current,
+            speed: rec.speed,
+            position: rec.position,
+        },
+    )
+}
+
+fn one_run(a: &MontecarloArgs, motor: &MotorParams, i: usize) -> Result<Run> {
+    let seed = a.seed.wrapping_add(2 * i as u64);
+    let hv = record(a, motor, a.high_voltage, seed)?;
+    let lv = record(a, motor, a.low_voltage, seed.wrapping_add(1))?;
+    let tests = [hv.test(), lv.test()];
+    let truth = values(motor);
+    let rel = |p: &MotorParams| {
+        let v = values(p);
+        std::array::from_fn(|k| (v[k] - truth[k]) / truth[k])
+    };
+    let paper = identify_paper(&tests[0], &tests[1], LmSettings::default())
+        .map_err(|e| BadInput(format!("run {i}: paper method: {e}")))?;
+    let full = identify_full(&tests, &paper.params, LmSettings::default())
+        .map_err(|e| BadInput(format!("run {i}: full method: {e}")))?;
+    Ok(Run {
+        paper_error: rel(&paper.params),
+        full_error: rel(&full.params),
+        covered: full
+            .ci95
+            .map(|ci| std::array::from_fn(|k| ci[k][0] <= truth[k] && truth[k] <= ci[k][1])),
+        converged: full.termination.converged(),
+    })
+}
+
+fn median_abs(xs: impl Iterator<Item = f64>) -> f64 {
+    let mut v: Vec<f64> = xs.map(f64::abs).collect();
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let mid = v.len() / 2;
+    *v.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
+pub fn run(a: &MontecarloArgs) -> Result<()> {
+    if a.runs == 0 {
+        return Err(BadInput("--runs 0: give at least one run".into()).into());
+    }
+    let motor = settings::motor(&a.motor.motor)?;
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(a.runs);
+    let done = AtomicUsize::new(0);
+    let started = std::time::Instant::now();
+    let mut results: Vec<Option<Result<Run>>> = (0..a.runs).map(|_| None).collect();
+    std::thread::scope(|scope| {
+        let chunks: Vec<_> = results
+            .chunks_mut(a.runs.div_ceil(threads))
+            .enumerate()
+            .collect();
+        let chunk_len = a.runs.div_ceil(threads);
+        for (c, chunk) in chunks {
+            let (motor, done) = (&motor, &done);
+            scope.spawn(move || {
+                for (j, slot) in chunk.iter_mut().enumerate() {
+                    *slot = Some(one_run(a, motor, c * chunk_len + j));
+                    let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+                    if !a.json && (n % (a.runs / 10).max(1) == 0 || n == a.runs) {
+                        eprintln!(
+                            "  {n}/{} record pairs identified ({:.1} s)",
+                            a.runs,
+                            started.elapsed().as_secs_f64()
+                        );
+                    }
+                }
+            });
+        }
+    });
+    let mut runs = Vec::new();
+    let mut failures = Vec::new();
+    for r in results.into_iter().flatten() {
+        match r {
+            Ok(run) => runs.push(run),
+            Err(e) => failures.push(e.to_string()),
+        }
+    }
+    let elapsed = started.elapsed().as_secs_f64();
+    let truth = values(&motor);
+    let with_ci = runs.iter().filter(|r| r.covered.is_some()).count();
+    let converged = runs.iter().filter(|r| r.converged).count();
+    let rows: Vec<_> = (0..6)
+        .map(|k| {
+            let paper = median_abs(runs.iter().map(|r| r.paper_error[k]));
+            let full = median_abs(runs.iter().map(|r| r.full_error[k]));
+            let covered = runs
+                .iter()
+                .filter(|r| r.covered.is_some_and(|c| c[k]))
+                .count();
+            let coverage = covered as f64 / with_ci.max(1) as f64;
+            (PARAM_NAMES[k], truth[k], paper, full, coverage)
+        })
+        .collect();
+    if a.json {
+        let report = json!({
+            "runs": runs.len(), "failed": failures, "runs_with_ci": with_ci, "converged": converged, "seconds": elapsed,
+            "parameters": rows.iter().map(|(name, truth, paper, full, coverage)| json!({
+                "name": name, "truth": truth, "paper_median_abs_rel_error": paper,
+                "full_median_abs_rel_error": full, "full_ci95_coverage": coverage,
+            })).collect::<Vec<_>>(),
+        });
+        println!("{}", serde_json::to_string_pretty(&report)?);
+        return Ok(());
+    }
+    println!(
+        "Monte Carlo: {} record pairs ({} V and {} V steps, {} s at {} Hz; {}-bit ADC, {} LSB noise, encoder {} counts/rev, speed from the encoder)",
+        runs.len(), a.high_voltage, a.low_voltage, a.duration, a.rate, a.adc_bits, a.noise_lsb, a.encoder_cpr
+    );
+    println!(
+        "  param        truth   paper median |error|   full median |error|   full 95% CI coverage"
+    );
+    for (name, truth, paper, full, coverage) in &rows {
+        println!(
+            "  {name:<5} {truth:>12.6}   {:>19.4} %   {:>18.5} %   {:>19.1} %",
+            100.0 * paper,
+            100.0 * full,
+            100.0 * coverage
+        );
+    }
+    println!(
+        "full fits converged: {converged}/{}; intervals available: {with_ci}/{}; {elapsed:.1} s on {threads} threads",
+        runs.len(),
+        runs.len()
+    );
+    if !failures.is_empty() {
+        println!("{} of {} runs failed:", failures.len(), a.runs);
+        for f in &failures {
+            println!("  {f}");
+        }
+    }
+    Ok(())
+}
