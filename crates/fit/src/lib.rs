@@ -29,6 +29,7 @@ mod full_model;
 mod lm;
 mod model33;
 mod paper_method;
+mod start;
 mod stats;
 mod steady_fit;
 mod step_location;
@@ -45,6 +46,7 @@ pub use paper_method::{
     from_high_voltage, identify_paper, suggested_low_voltage_45, tau_m_as_printed_37,
     with_low_voltage, HighVoltageResult, PaperIdentification, TwoTestFriction,
 };
+pub use start::steady_state_start;
 pub use stats::{
     newey_west_lags, sandwich_uncertainty, student_t_quantile, uncertainty, Uncertainty,
 };

@@ -4,8 +4,8 @@ use std::path::Path;
 
 use anyhow::Result;
 use fit::{
-    fit_apparent_resistance, identify_full, identify_paper, locate_step, FullFit, LmSettings,
-    PaperIdentification, StepTest, PARAM_NAMES, PARAM_UNITS,
+    fit_apparent_resistance, identify_full, identify_paper, locate_step, steady_state_start,
+    FullFit, LmSettings, PaperIdentification, StepTest, PARAM_NAMES, PARAM_UNITS,
 };
 use motor_model::{central_difference, Derived, MotorParams};
 use serde_json::{json, Value};
@@ -106,11 +106,15 @@ fn paper_json(paper: &PaperIdentification) -> Value {
 /// The JSON report: parameters with 95 % CIs and units, derived constants, fit quality.
 pub fn report_json(
     method: MethodArg,
-    paper: &PaperIdentification,
+    paper: Result<&PaperIdentification, &str>,
     full: Option<&FullFit>,
     files: [&str; 2],
 ) -> Value {
-    let params = full.map_or(paper.params, |f| f.params);
+    let params = match (full, paper) {
+        (Some(f), _) => f.params,
+        (None, Ok(p)) => p.params,
+        (None, Err(_)) => return Value::Null,
+    };
     let v = values(&params);
     let mut parameters = serde_json::Map::new();
     for i in 0..6 {
@@ -131,29 +135,39 @@ pub fn report_json(
                 "nrmse_fit_percent": q.nrmse_fit_percent, "noise_std": q.noise_std,
             })).collect::<Vec<_>>(),
         }),
-        None => json!({
-            "termination": paper.fit_33.report.termination.text(),
-            "converged": paper.fit_33.report.termination.converged(),
-            "iterations": paper.fit_33.report.iterations,
-            "eq33_residual_rms": (2.0 * paper.fit_33.report.normal.cost / paper.fit_33.report.normal.n_residuals as f64).sqrt(),
-        }),
+        None => match paper {
+            Ok(paper) => json!({
+                "termination": paper.fit_33.report.termination.text(),
+                "converged": paper.fit_33.report.termination.converged(),
+                "iterations": paper.fit_33.report.iterations,
+                "eq33_residual_rms": (2.0 * paper.fit_33.report.normal.cost / paper.fit_33.report.normal.n_residuals as f64).sqrt(),
+            }),
+            Err(_) => Value::Null,
+        },
     };
     json!({
         "method": match method { MethodArg::Paper => "paper", MethodArg::Full => "full" },
         "parameters": parameters,
         "derived": serde_json::to_value(Derived::new(&params)).unwrap_or(Value::Null),
         "quality": quality,
-        "paper_method": paper_json(paper),
+        "paper_method": match paper {
+            Ok(p) => paper_json(p),
+            Err(why) => json!({"failed": why}),
+        },
     })
 }
 
 fn print_table(
     method: MethodArg,
-    paper: &PaperIdentification,
+    paper: Result<&PaperIdentification, &str>,
     full: Option<&FullFit>,
     files: [&str; 2],
 ) {
-    let params = full.map_or(paper.params, |f| f.params);
+    let params = match (full, paper) {
+        (Some(f), _) => f.params,
+        (None, Ok(p)) => p.params,
+        (None, Err(_)) => return,
+    };
     let v = values(&params);
     match method {
         MethodArg::Full => println!("full model: R, L, k, f, J, Ts fitted jointly to both records (exact response, breakaway included)"),
@@ -187,19 +201,34 @@ fn print_table(
     );
     match full {
         Some(f) => {
-            println!("fit: {} after {} iterations", f.termination.text(), f.iterations);
+            println!(
+                "fit: {} after {} iterations",
+                f.termination.text(),
+                f.iterations
+            );
             for q in &f.quality {
                 println!(
                     "  {} {}: residual RMS {:.3e}, fit {:.3} %, noise {:.3e}",
-                    files[q.test], q.channel.name(), q.rms_residual, q.nrmse_fit_percent, q.noise_std
+                    files[q.test],
+                    q.channel.name(),
+                    q.rms_residual,
+                    q.nrmse_fit_percent,
+                    q.noise_std
                 );
             }
         }
-        None => println!(
-            "Eq. (33) fit: alpha = {:.6}, sigma = {:.6} 1/s, wa = {:.6} rad/s; {} after {} iterations",
-            paper.fit_33.params.alpha, paper.fit_33.params.sigma, paper.fit_33.params.omega_a,
-            paper.fit_33.report.termination.text(), paper.fit_33.report.iterations
-        ),
+        None => {
+            if let Ok(paper) = paper {
+                println!(
+                    "Eq. (33) fit: alpha = {:.6}, sigma = {:.6} 1/s, wa = {:.6} rad/s; {} after {} iterations",
+                    paper.fit_33.params.alpha, paper.fit_33.params.sigma, paper.fit_33.params.omega_a,
+                    paper.fit_33.report.termination.text(), paper.fit_33.report.iterations
+                )
+            }
+        }
+    }
+    if let (Err(why), Some(_)) = (paper, full) {
+        println!("note: the paper's method does not apply to these records ({why}); the full fit started from the steady states instead");
     }
     if !poorly.is_empty() {
         println!(
@@ -271,22 +300,31 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
     let files = [hv.path.as_str(), lv.path.as_str()];
     let tests = [hv.test(), lv.test()];
     let settings = LmSettings::default();
-    let paper = identify_paper(&tests[0], &tests[1], settings)
-        .map_err(|e| BadInput(format!("{} / {}: {e}", files[0], files[1])))?;
-    let full = match a.method {
-        MethodArg::Paper => None,
-        MethodArg::Full => Some(
-            identify_full(&tests, &paper.params, settings)
-                .map_err(|e| BadInput(format!("{} / {}: {e}", files[0], files[1])))?,
-        ),
+    let both = format!("{} / {}", files[0], files[1]);
+    let paper = identify_paper(&tests[0], &tests[1], settings).map_err(|e| e.to_string());
+    let full = match (a.method, &paper) {
+        (MethodArg::Paper, Err(e)) => return Err(BadInput(format!("{both}: {e}")).into()),
+        (MethodArg::Paper, Ok(_)) => None,
+        (MethodArg::Full, _) => {
+            let start = match &paper {
+                Ok(p) => p.params,
+                Err(_) => steady_state_start(&tests[0], &tests[1])
+                    .map_err(|e| BadInput(format!("{both}: {e}")))?,
+            };
+            Some(
+                identify_full(&tests, &start, settings)
+                    .map_err(|e| BadInput(format!("{both}: {e}")))?,
+            )
+        }
     };
+    let paper = paper.as_ref().map_err(String::as_str);
     if a.json {
         println!(
             "{}",
-            serde_json::to_string_pretty(&report_json(a.method, &paper, full.as_ref(), files))?
+            serde_json::to_string_pretty(&report_json(a.method, paper, full.as_ref(), files))?
         );
     } else {
-        print_table(a.method, &paper, full.as_ref(), files);
+        print_table(a.method, paper, full.as_ref(), files);
     }
     if let Some(f) = &full {
         if !f.termination.converged() {

@@ -4,7 +4,7 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::Result;
-use fit::{identify_full, identify_paper, LmSettings, PARAM_NAMES};
+use fit::{identify_full, identify_paper, steady_state_start, LmSettings, PARAM_NAMES};
 use motor_model::{MotorParams, StepResponse};
 use serde_json::json;
 
@@ -16,7 +16,8 @@ use crate::BadInput;
 
 /// Outcome of one record pair.
 struct Run {
-    paper_error: [f64; 6],
+    /// `None` where the paper's method does not apply (e.g. an underdamped motor).
+    paper_error: Option<[f64; 6]>,
     full_error: [f64; 6],
     covered: Option<[bool; 6]>,
     converged: bool,
@@ -72,12 +73,16 @@ fn one_run(a: &MontecarloArgs, motor: &MotorParams, i: usize) -> Result<Run> {
         let v = values(p);
         std::array::from_fn(|k| (v[k] - truth[k]) / truth[k])
     };
-    let paper = identify_paper(&tests[0], &tests[1], LmSettings::default())
-        .map_err(|e| BadInput(format!("run {i}: paper method: {e}")))?;
-    let full = identify_full(&tests, &paper.params, LmSettings::default())
+    let paper = identify_paper(&tests[0], &tests[1], LmSettings::default()).ok();
+    let start = match &paper {
+        Some(p) => p.params,
+        None => steady_state_start(&tests[0], &tests[1])
+            .map_err(|e| BadInput(format!("run {i}: start: {e}")))?,
+    };
+    let full = identify_full(&tests, &start, LmSettings::default())
         .map_err(|e| BadInput(format!("run {i}: full method: {e}")))?;
     Ok(Run {
-        paper_error: rel(&paper.params),
+        paper_error: paper.map(|p| rel(&p.params)),
         full_error: rel(&full.params),
         covered: full
             .ci95
@@ -141,9 +146,10 @@ pub fn run(a: &MontecarloArgs) -> Result<()> {
     let truth = values(&motor);
     let with_ci = runs.iter().filter(|r| r.covered.is_some()).count();
     let converged = runs.iter().filter(|r| r.converged).count();
+    let paper_applied = runs.iter().filter(|r| r.paper_error.is_some()).count();
     let rows: Vec<_> = (0..6)
         .map(|k| {
-            let paper = median_abs(runs.iter().map(|r| r.paper_error[k]));
+            let paper = median_abs(runs.iter().filter_map(|r| r.paper_error.map(|e| e[k])));
             let full = median_abs(runs.iter().map(|r| r.full_error[k]));
             let covered = runs
                 .iter()
@@ -155,7 +161,7 @@ pub fn run(a: &MontecarloArgs) -> Result<()> {
         .collect();
     if a.json {
         let report = json!({
-            "runs": runs.len(), "failed": failures, "runs_with_ci": with_ci, "converged": converged, "seconds": elapsed,
+            "runs": runs.len(), "failed": failures, "paper_method_applied": paper_applied, "runs_with_ci": with_ci, "converged": converged, "seconds": elapsed,
             "parameters": rows.iter().map(|(name, truth, paper, full, coverage)| json!({
                 "name": name, "truth": truth, "paper_median_abs_rel_error": paper,
                 "full_median_abs_rel_error": full, "full_ci95_coverage": coverage,
@@ -184,9 +190,15 @@ pub fn run(a: &MontecarloArgs) -> Result<()> {
         runs.len(),
         runs.len()
     );
+    if paper_applied < runs.len() {
+        println!(
+            "the paper's method applied to {paper_applied}/{} runs (it needs an overdamped response); the others started from the steady states",
+            runs.len()
+        );
+    }
     if !failures.is_empty() {
-        println!("{} of {} runs failed:", failures.len(), a.runs);
-        for f in &failures {
+        println!("{} of {} runs failed; the first:", failures.len(), a.runs);
+        for f in failures.iter().take(5) {
             println!("  {f}");
         }
     }

@@ -1,0 +1,71 @@
+//! A start for the full model that needs no damping regime: steady states and rise times.
+//!
+//! With the steady values of two steps, Eq. (5) `E = R Ir + k Ωr` gives R and k (two linear
+//! equations), and the torque balance `k Ir = Ts + f Ωr` gives Ts and f. L follows from the
+//! first current sample, which obeys Eq. (10) before the back-EMF builds up, and J from the
+//! time the high-voltage speed takes to reach 1 − 1/e of its final value (the slow time
+//! constant `≈ J R/(R f + k²)` when τe ≪ τm). Rough, but on the right side of every regime.
+
+use motor_model::MotorParams;
+
+use crate::error::FitError;
+use crate::full_model::StepTest;
+
+fn bad(reason: String) -> FitError {
+    FitError::MethodDomain {
+        equation: "steady-state start (Eqs. (5), (2), (10))",
+        reason,
+    }
+}
+
+/// Solves `[a b; c d] x = [e; f]`.
+fn solve2(a: f64, b: f64, c: f64, d: f64, e: f64, f: f64) -> Option<(f64, f64)> {
+    let det = a * d - b * c;
+    (det.abs() > f64::EPSILON * (a * d).abs().max((b * c).abs()))
+        .then(|| ((e * d - b * f) / det, (a * f - e * c) / det))
+}
+
+/// Mean of the last tenth of a series (the steady value of a settled record).
+fn tail_mean(y: &[f64]) -> f64 {
+    let n = (y.len() / 10).max(1);
+    y[y.len() - n..].iter().sum::<f64>() / n as f64
+}
+
+/// A start for [`crate::identify_full`] from a high- and a low-voltage test with speed.
+pub fn steady_state_start(
+    high: &StepTest<'_>,
+    low: &StepTest<'_>,
+) -> Result<MotorParams, FitError> {
+    let (Some(wh), Some(wl)) = (high.speed, low.speed) else {
+        return Err(bad("both tests need a speed (or position) channel".into()));
+    };
+    let (ih, il) = (tail_mean(high.current), tail_mean(low.current));
+    let (oh, ol) = (tail_mean(wh), tail_mean(wl));
+    let (r, k) = solve2(ih, oh, il, ol, high.volts, low.volts).ok_or_else(|| {
+        bad("the two tests' steady states are proportional: use two different voltages".into())
+    })?;
+    // k Ir = Ts + f Ωr for both tests.
+    let (ts, f) = solve2(1.0, oh, 1.0, ol, k * ih, k * il)
+        .ok_or_else(|| bad("the two tests reach the same speed".into()))?;
+    // Eq. (10) at the first sample after the step: I = E/R (1 − e^{−t R/L}).
+    let t1 = high.t_first + high.dt;
+    let i1 = high.current.get(1).copied().unwrap_or(f64::NAN);
+    let frac = r * i1 / high.volts;
+    let l = if frac > 0.0 && frac < 1.0 {
+        -t1 * r / (-frac).ln_1p()
+    } else {
+        // Current already near E/R after one sample: L is below what the record resolves.
+        0.1 * t1 * r
+    };
+    let target = (1.0 - (-1.0f64).exp()) * oh;
+    let rise = wh
+        .iter()
+        .position(|w| w.abs() >= target.abs())
+        .map_or(f64::NAN, |i| high.t_first + i as f64 * high.dt);
+    let j = rise * (r * f + k * k) / r;
+    MotorParams::new(r, l, k, f, j, ts).map_err(|e| {
+        bad(format!(
+            "{e} (steady currents {ih:.4} / {il:.4} A, speeds {oh:.4} / {ol:.4} rad/s: did both records settle?)"
+        ))
+    })
+}
