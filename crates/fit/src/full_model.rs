@@ -31,21 +31,24 @@ pub struct StepTest<'a> {
     pub dt: f64,
     /// Armature current \[A\].
     pub current: &'a [f64],
-    /// Speed \[rad/s\], if measured.
+    /// Speed \[rad/s\] measured directly (tachometer), if any. Not used when `position` is given.
     pub speed: Option<&'a [f64]>,
-    /// Angle since the step \[rad\], if measured.
+    /// Encoder angle \[rad\] (any offset), if measured. Fitted through its central difference,
+    /// with the same difference applied to the model's angle ([`Channel::EncoderSpeed`]).
     pub position: Option<&'a [f64]>,
 }
 
-/// The measured channels, in a fixed order.
+/// The fitted channels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Channel {
     /// Current \[A\].
     Current,
-    /// Speed \[rad/s\].
+    /// Speed \[rad/s\] as measured (instantaneous: a tachometer).
     Speed,
-    /// Angle \[rad\].
-    Position,
+    /// Speed \[rad/s\] as the central difference of the encoder angle, compared with the same
+    /// central difference of the model's angle: exact however fast the motor, and blind to the
+    /// encoder's unknown count offset.
+    EncoderSpeed,
 }
 
 impl Channel {
@@ -54,15 +57,7 @@ impl Channel {
         match self {
             Channel::Current => "current",
             Channel::Speed => "speed",
-            Channel::Position => "position",
-        }
-    }
-
-    fn of(self, s: &MotorState<impl Real>) -> f64 {
-        match self {
-            Channel::Current => s.current_a.value(),
-            Channel::Speed => s.speed_rad_s.value(),
-            Channel::Position => s.position_rad.value(),
+            Channel::EncoderSpeed => "encoder speed",
         }
     }
 }
@@ -74,8 +69,8 @@ pub struct ChannelQuality {
     pub test: usize,
     /// Which channel.
     pub channel: Channel,
-    /// Noise standard deviation estimated from the record, used as the channel's weight
-    /// (unit of the channel).
+    /// Noise standard deviation used as the channel's weight (unit of the channel): estimated
+    /// from the record, then the residual RMS of a first fit.
     pub noise_std: f64,
     /// RMS of the residual at the solution (unit of the channel).
     pub rms_residual: f64,
@@ -91,13 +86,14 @@ pub struct FullFit {
     /// Standard errors of R, L, k, f, J, Ts (SI units); `None` if the fit has no
     /// degrees of freedom or a singular Jacobian (a parameter the data cannot determine).
     pub std_error: Option<[f64; 6]>,
-    /// 95 % intervals `[lo, hi]` (t distribution, as `nlparci`), SI units.
+    /// 95 % intervals `[lo, hi]` (t distribution, as `nlparci`, on a Newey–West covariance),
+    /// SI units.
     pub ci95: Option<[[f64; 2]; 6]>,
     /// Correlation matrix of the parameters (6 × 6).
     pub correlation: Option<DMatrix<f64>>,
     /// Per-channel fit quality.
     pub quality: Vec<ChannelQuality>,
-    /// Accepted iterations.
+    /// Accepted iterations (both stages).
     pub iterations: u64,
     /// Why the solver stopped.
     pub termination: Termination,
@@ -133,13 +129,23 @@ pub fn noise_std(y: &[f64]) -> f64 {
     (mean_sq.sqrt() / 6f64.sqrt()).max(floor)
 }
 
-struct Weighted<'a> {
-    test: StepTest<'a>,
-    channels: Vec<(Channel, &'a [f64], f64)>,
+/// A channel's data and weight.
+struct ChannelData {
+    kind: Channel,
+    data: Vec<f64>,
+    sigma: f64,
 }
 
-struct FullProblem<'a> {
-    tests: Vec<Weighted<'a>>,
+struct Weighted {
+    volts: f64,
+    t_first: f64,
+    dt: f64,
+    n: usize,
+    channels: Vec<ChannelData>,
+}
+
+struct FullProblem {
+    tests: Vec<Weighted>,
     n_residuals: usize,
 }
 
@@ -150,75 +156,115 @@ fn params_of<T: Real>(theta: &[f64], make: impl Fn(f64, usize) -> T) -> Option<[
     Some(std::array::from_fn(|i| make(theta[i], i).exp()))
 }
 
-impl FullProblem<'_> {
-    /// Streams every residual of every channel at `theta`, with the model sample.
+/// Central difference of `y` on a uniform grid `dt` at index `i`, one-sided at the ends — the
+/// operator of `motor_model::central_difference`, applied to data and model alike.
+fn difference_at<T: Real>(window: &[T; 3], i: usize, n: usize, dt: f64) -> T {
+    // window = [y_{i-1}, y_i, y_{i+1}] where they exist.
+    if i == 0 {
+        (window[2] - window[1]) / T::cst(dt)
+    } else if i + 1 == n {
+        (window[1] - window[0]) / T::cst(dt)
+    } else {
+        (window[2] - window[0]) / T::cst(2.0 * dt)
+    }
+}
+
+impl FullProblem {
+    /// Streams every residual in order: `visit(test, channel index, i, model, y, sigma)`.
     fn for_each<T: Real>(
         &self,
         params: [T; 6],
-        mut visit: impl FnMut(&MotorState<T>, Channel, f64, f64),
+        mut visit: impl FnMut(usize, usize, usize, T, f64, f64),
     ) {
-        for w in &self.tests {
-            let response = StepResponse::from_values(params, w.test.volts);
-            let n = w.test.current.len();
-            response.for_each_sample(w.test.t_first, w.test.dt, n, |i, s| {
-                for &(channel, data, sigma) in &w.channels {
-                    if let Some(&y) = data.get(i) {
-                        visit(&s, channel, y, sigma);
+        for (k, w) in self.tests.iter().enumerate() {
+            let response = StepResponse::from_values(params, w.volts);
+            // Model angles at i−2, i−1, i for the encoder-speed channel, emitted one sample late.
+            let mut angles = [T::cst(0.0); 3];
+            let n = w.n;
+            let emit_encoder =
+                |i: usize,
+                 window: &[T; 3],
+                 visit: &mut dyn FnMut(usize, usize, usize, T, f64, f64)| {
+                    for (c, ch) in w.channels.iter().enumerate() {
+                        if ch.kind == Channel::EncoderSpeed {
+                            if let Some(&y) = ch.data.get(i) {
+                                visit(k, c, i, difference_at(window, i, n, w.dt), y, ch.sigma);
+                            }
+                        }
                     }
+                };
+            response.for_each_sample(w.t_first, w.dt, n, |i, s: MotorState<T>| {
+                for (c, ch) in w.channels.iter().enumerate() {
+                    let model = match ch.kind {
+                        Channel::Current => s.current_a,
+                        Channel::Speed => s.speed_rad_s,
+                        Channel::EncoderSpeed => continue,
+                    };
+                    if let Some(&y) = ch.data.get(i) {
+                        visit(k, c, i, model, y, ch.sigma);
+                    }
+                }
+                angles = [angles[1], angles[2], s.position_rad];
+                // Sample i−1 now has both neighbours.
+                if i >= 1 {
+                    let window = if i == 1 {
+                        [angles[1], angles[1], angles[2]]
+                    } else {
+                        angles
+                    };
+                    emit_encoder(i - 1, &window, &mut visit);
+                }
+                if i + 1 == n {
+                    emit_encoder(i, &[angles[1], angles[2], angles[2]], &mut visit);
                 }
             });
         }
     }
-}
 
-impl FullProblem<'_> {
     /// Newey–West estimate of the covariance of the score `Jᵀr` at `theta`: within each channel
     /// of each test, `Σᵢ gᵢgᵢᵀ + Σₗ wₗ (gᵢgᵢ₋ₗᵀ + gᵢ₋ₗgᵢᵀ)` with `gᵢ = rᵢ ∂rᵢ/∂θ` and Bartlett
     /// weights `wₗ = 1 − l/(L+1)`; channels are taken as independent of each other.
     fn score_covariance(&self, theta: &[f64]) -> Option<DMatrix<f64>> {
         let params = params_of::<Dual<6>>(theta, Dual::variable)?;
         let mut s = [[0.0; 6]; 6];
-        for w in &self.tests {
-            let n = w.test.current.len();
-            let lags = newey_west_lags(n);
-            let response = StepResponse::from_values(params, w.test.volts);
-            for &(channel, data, sigma) in &w.channels {
-                // Ring buffer of the last `lags` scores.
-                let mut ring = vec![[0.0; 6]; lags.max(1)];
-                response.for_each_sample(w.test.t_first, w.test.dt, n, |i, st| {
-                    let Some(&y) = data.get(i) else { return };
-                    let m = match channel {
-                        Channel::Current => st.current_a,
-                        Channel::Speed => st.speed_rad_s,
-                        Channel::Position => st.position_rad,
-                    };
-                    let r = (m.v - y) / sigma;
-                    let g = m.d.map(|d| d / sigma * r);
-                    for a in 0..6 {
-                        for b in 0..6 {
-                            s[a][b] += g[a] * g[b];
-                        }
-                    }
-                    for l in 1..=lags.min(i) {
-                        let weight = 1.0 - l as f64 / (lags as f64 + 1.0);
-                        let past = ring[(i - l) % ring.len()];
-                        for a in 0..6 {
-                            for b in 0..6 {
-                                s[a][b] += weight * (g[a] * past[b] + past[a] * g[b]);
-                            }
-                        }
-                    }
-                    let len = ring.len();
-                    ring[i % len] = g;
-                });
+        // One ring of past scores per (test, channel).
+        let mut rings: Vec<Vec<(usize, Vec<[f64; 6]>)>> = self
+            .tests
+            .iter()
+            .map(|w| {
+                let lags = newey_west_lags(w.n).max(1);
+                w.channels
+                    .iter()
+                    .map(|_| (lags, vec![[0.0; 6]; lags]))
+                    .collect()
+            })
+            .collect();
+        self.for_each(params, |k, c, i, m, y, sigma| {
+            let r = (m.v - y) / sigma;
+            let g = m.d.map(|d| d / sigma * r);
+            let (lags, ring) = &mut rings[k][c];
+            for a in 0..6 {
+                for b in 0..6 {
+                    s[a][b] += g[a] * g[b];
+                }
             }
-        }
+            for l in 1..=(*lags).min(i) {
+                let weight = 1.0 - l as f64 / (*lags as f64 + 1.0);
+                let past = ring[(i - l) % *lags];
+                for a in 0..6 {
+                    for b in 0..6 {
+                        s[a][b] += weight * (g[a] * past[b] + past[a] * g[b]);
+                    }
+                }
+            }
+            ring[i % *lags] = g;
+        });
         let m = DMatrix::from_fn(6, 6, |a, b| s[a][b]);
         m.iter().all(|v| v.is_finite()).then_some(m)
     }
 }
 
-impl LeastSquares for FullProblem<'_> {
+impl LeastSquares for FullProblem {
     fn n_params(&self) -> usize {
         6
     }
@@ -226,8 +272,8 @@ impl LeastSquares for FullProblem<'_> {
     fn cost(&self, theta: &[f64]) -> Option<f64> {
         let params = params_of::<f64>(theta, |v, _| v)?;
         let mut cost = 0.0;
-        self.for_each(params, |s, ch, y, sigma| {
-            let r = (ch.of(s) - y) / sigma;
+        self.for_each(params, |_, _, _, m, y, sigma| {
+            let r = (m - y) / sigma;
             cost += r * r;
         });
         cost.is_finite().then_some(0.5 * cost)
@@ -238,12 +284,7 @@ impl LeastSquares for FullProblem<'_> {
         let mut jtj = [[0.0; 6]; 6];
         let mut jtr = [0.0; 6];
         let mut cost = 0.0;
-        self.for_each(params, |s, ch, y, sigma| {
-            let m = match ch {
-                Channel::Current => s.current_a,
-                Channel::Speed => s.speed_rad_s,
-                Channel::Position => s.position_rad,
-            };
+        self.for_each(params, |_, _, _, m, y, sigma| {
             let inv = 1.0 / sigma;
             let r = (m.v - y) * inv;
             let g = m.d.map(|d| d * inv);
@@ -331,18 +372,42 @@ pub fn identify_full(
             });
         }
         let mut channels = Vec::new();
-        for (channel, data) in [
-            (Channel::Current, Some(t.current)),
-            (Channel::Speed, t.speed),
-            (Channel::Position, t.position),
-        ] {
-            if let Some(y) = data {
-                check_series(label(channel.name()), y, n)?;
-                channels.push((channel, y, noise_std(y)));
-                n_residuals += n;
+        check_series(label("current"), t.current, n)?;
+        channels.push(ChannelData {
+            kind: Channel::Current,
+            data: t.current.to_vec(),
+            sigma: noise_std(t.current),
+        });
+        match (t.position, t.speed) {
+            (Some(angle), _) => {
+                check_series(label("position"), angle, n)?;
+                let times: Vec<f64> = (0..n).map(|i| t.t_first + i as f64 * t.dt).collect();
+                let data = motor_model::central_difference(&times, angle);
+                let sigma = noise_std(&data);
+                channels.push(ChannelData {
+                    kind: Channel::EncoderSpeed,
+                    data,
+                    sigma,
+                });
             }
+            (None, Some(speed)) => {
+                check_series(label("speed"), speed, n)?;
+                channels.push(ChannelData {
+                    kind: Channel::Speed,
+                    data: speed.to_vec(),
+                    sigma: noise_std(speed),
+                });
+            }
+            (None, None) => {}
         }
-        weighted.push(Weighted { test: *t, channels });
+        n_residuals += n * channels.len();
+        weighted.push(Weighted {
+            volts: t.volts,
+            t_first: t.t_first,
+            dt: t.dt,
+            n,
+            channels,
+        });
     }
     let mut problem = FullProblem {
         tests: weighted,
@@ -365,28 +430,33 @@ pub fn identify_full(
     // every channel's weighted residuals have unit variance and the pooled variance behind the
     // intervals describes each of them (feasible generalised least squares). Skipped when the
     // first stage did not converge or a channel fits exactly (noise-free data).
-    let report = match params_of::<f64>(&first.params, |v, _| v) {
+    let first_iterations = first.iterations;
+    let (report, iterations) = match params_of::<f64>(&first.params, |v, _| v) {
         Some(values) if first.termination.converged() => {
             let rms = channel_quality(&problem, values);
             let mut changed = false;
-            for (w, q) in problem
+            for (ch, q) in problem
                 .tests
                 .iter_mut()
                 .flat_map(|w| w.channels.iter_mut())
                 .zip(&rms)
             {
-                if q.rms_residual > 1e3 * w.2 * f64::EPSILON.sqrt() && q.rms_residual.is_finite() {
-                    w.2 = q.rms_residual;
+                if q.rms_residual > 1e3 * ch.sigma * f64::EPSILON.sqrt()
+                    && q.rms_residual.is_finite()
+                {
+                    ch.sigma = q.rms_residual;
                     changed = true;
                 }
             }
             if changed {
-                solve(&problem, &first.params, settings)?
+                let second = solve(&problem, &first.params, settings)?;
+                let total = first_iterations + second.iterations;
+                (second, total)
             } else {
-                first
+                (first, first_iterations)
             }
         }
-        _ => first,
+        _ => (first, first_iterations),
     };
     let values: [f64; 6] = params_of::<f64>(&report.params, |v, _| v)
         .ok_or_else(|| FitError::Solver("parameters left the representable range".into()))?;
@@ -415,30 +485,42 @@ pub fn identify_full(
         ci95,
         correlation: unc.map(|u| u.correlation),
         quality,
-        iterations: report.iterations,
+        iterations,
         termination: report.termination,
         cost: report.normal.cost,
     })
 }
 
-fn channel_quality(problem: &FullProblem<'_>, values: [f64; 6]) -> Vec<ChannelQuality> {
+fn channel_quality(problem: &FullProblem, values: [f64; 6]) -> Vec<ChannelQuality> {
+    let mut sums: Vec<Vec<(f64, f64)>> = problem
+        .tests
+        .iter()
+        .map(|w| vec![(0.0, 0.0); w.channels.len()])
+        .collect();
+    let means: Vec<Vec<f64>> = problem
+        .tests
+        .iter()
+        .map(|w| {
+            w.channels
+                .iter()
+                .map(|c| c.data.iter().sum::<f64>() / c.data.len().max(1) as f64)
+                .collect()
+        })
+        .collect();
+    problem.for_each(values, |k, c, _, m, y, _| {
+        let (sse, sst) = &mut sums[k][c];
+        *sse += (m - y).powi(2);
+        *sst += (y - means[k][c]).powi(2);
+    });
     let mut out = Vec::new();
     for (k, w) in problem.tests.iter().enumerate() {
-        let response = StepResponse::from_values(values, w.test.volts);
-        for &(channel, data, sigma) in &w.channels {
-            let mean = data.iter().sum::<f64>() / data.len() as f64;
-            let (mut sse, mut sst) = (0.0, 0.0);
-            response.for_each_sample(w.test.t_first, w.test.dt, data.len(), |i, s| {
-                if let Some(&y) = data.get(i) {
-                    sse += (channel.of(&s) - y).powi(2);
-                    sst += (y - mean).powi(2);
-                }
-            });
+        for (c, ch) in w.channels.iter().enumerate() {
+            let (sse, sst) = sums[k][c];
             out.push(ChannelQuality {
                 test: k,
-                channel,
-                noise_std: sigma,
-                rms_residual: (sse / data.len() as f64).sqrt(),
+                channel: ch.kind,
+                noise_std: ch.sigma,
+                rms_residual: (sse / ch.data.len().max(1) as f64).sqrt(),
                 nrmse_fit_percent: if sst > 0.0 {
                     100.0 * (1.0 - (sse / sst).sqrt())
                 } else {

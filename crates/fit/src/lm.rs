@@ -54,8 +54,8 @@ pub enum Termination {
     Converged,
     /// Gradient `‖Jᵀr‖∞` below `gtol` (an exact fit).
     ZeroGradient,
-    /// No step lowered the cost even with the largest damping: a (possibly local) minimum
-    /// reached to the precision of the arithmetic, or a problem the model cannot follow.
+    /// No step lowered the cost even with the largest damping, although the local model
+    /// promised a gain larger than √ε of the cost: the model and the data disagree there.
     Stalled,
     /// The iteration budget ran out before convergence.
     MaxIterations,
@@ -138,6 +138,9 @@ impl LmSettings {
 
 /// Largest damping tried before the solver declares itself stalled.
 const LAMBDA_MAX: f64 = 1e16;
+/// Relative predicted gain below which a solver that can no longer lower the cost counts as
+/// converged: `√ε`, MINPACK's default `ftol`.
+const STALL_PRECISION: f64 = 1.4901161193847656e-8;
 /// Damping floor on `diag(JᵀJ)` relative to its largest entry (keeps the scaling invertible
 /// when a parameter has no influence at the current point).
 const DIAG_FLOOR: f64 = 1e-12;
@@ -254,12 +257,15 @@ impl<P: LeastSquares> Solver<ArgminProblem<'_, P>, LmState> for LevenbergMarquar
         // Predicted reduction of the undamped Gauss–Newton step, ½ Jᵀr·(JᵀJ)⁻¹Jᵀr: when the
         // local quadratic model says less than ftol·C is left to gain, the fit has converged
         // (MINPACK's test; the actual reduction alone stalls on rounding at a noisy optimum).
-        if let Some(chol) = normal.jtj.clone().cholesky() {
-            let predicted = 0.5 * normal.jtr.dot(&chol.solve(&normal.jtr));
-            if predicted.is_finite() && predicted <= self.settings.ftol * cost {
-                self.stop = Some(Termination::Converged);
-                return Ok((state, None));
-            }
+        let predicted = normal
+            .jtj
+            .clone()
+            .cholesky()
+            .map(|chol| 0.5 * normal.jtr.dot(&chol.solve(&normal.jtr)))
+            .filter(|p| p.is_finite());
+        if predicted.is_some_and(|p| p <= self.settings.ftol * cost) {
+            self.stop = Some(Termination::Converged);
+            return Ok((state, None));
         }
         let diag_max = (0..n).map(|i| normal.jtj[(i, i)]).fold(0.0_f64, f64::max);
         loop {
@@ -289,7 +295,15 @@ impl<P: LeastSquares> Solver<ArgminProblem<'_, P>, LmState> for LevenbergMarquar
             }
             self.lambda *= 4.0;
             if self.lambda > LAMBDA_MAX {
-                self.stop = Some(Termination::Stalled);
+                // No step lowers the cost. If the quadratic model promised less than √ε of it,
+                // rounding in the summed cost is what stopped progress: converged to working
+                // precision. Otherwise the model and the data disagree: a genuine stall.
+                let at_precision = predicted.is_some_and(|p| p <= STALL_PRECISION * cost);
+                self.stop = Some(if at_precision {
+                    Termination::Converged
+                } else {
+                    Termination::Stalled
+                });
                 return Ok((state, None));
             }
         }

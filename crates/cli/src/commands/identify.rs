@@ -25,6 +25,7 @@ pub struct LoadedStep {
     dt: f64,
     current: Vec<f64>,
     speed: Option<Vec<f64>>,
+    position: Option<Vec<f64>>,
 }
 
 impl LoadedStep {
@@ -36,7 +37,7 @@ impl LoadedStep {
             dt: self.dt,
             current: &self.current,
             speed: self.speed.as_deref(),
-            position: None,
+            position: self.position.as_deref(),
         }
     }
 }
@@ -47,7 +48,8 @@ pub fn load_step(path: &Path) -> Result<LoadedStep> {
 }
 
 /// Finds the step in `cols` (named `shown` in errors) and keeps the samples from it on. Speed
-/// comes from the `speed` column, or from the `position` column by central differences.
+/// (for the paper method's Ωrm) comes from the `speed` column, or from the `position` column by
+/// central differences; the full fit uses the encoder angle where there is one.
 pub fn step_from_columns(shown: String, cols: RecordColumns) -> Result<LoadedStep> {
     let loc = locate_step(&cols.t, &cols.voltage).map_err(|e| BadInput(format!("{shown}: {e}")))?;
     let from = loc.index;
@@ -62,6 +64,7 @@ pub fn step_from_columns(shown: String, cols: RecordColumns) -> Result<LoadedSte
         dt: loc.dt,
         current: cols.current[from..].to_vec(),
         speed,
+        position: cols.position.as_ref().map(|p| p[from..].to_vec()),
     })
 }
 

@@ -21,6 +21,8 @@ struct Run {
     full_error: [f64; 6],
     covered: Option<[bool; 6]>,
     converged: bool,
+    /// Termination and cost of a fit that did not converge.
+    stop: Option<String>,
 }
 
 fn values(p: &MotorParams) -> [f64; 6] {
@@ -88,6 +90,14 @@ fn one_run(a: &MontecarloArgs, motor: &MotorParams, i: usize) -> Result<Run> {
             .ci95
             .map(|ci| std::array::from_fn(|k| ci[k][0] <= truth[k] && truth[k] <= ci[k][1])),
         converged: full.termination.converged(),
+        stop: (!full.termination.converged()).then(|| {
+            format!(
+                "run {i}: {} after {} iterations, weighted cost {:.6e}",
+                full.termination.text(),
+                full.iterations,
+                full.cost
+            )
+        }),
     })
 }
 
@@ -190,6 +200,9 @@ pub fn run(a: &MontecarloArgs) -> Result<()> {
         runs.len(),
         runs.len()
     );
+    for stop in runs.iter().filter_map(|r| r.stop.as_ref()).take(5) {
+        println!("  not converged: {stop}");
+    }
     if paper_applied < runs.len() {
         println!(
             "the paper's method applied to {paper_applied}/{} runs (it needs an overdamped response); the others started from the steady states",
