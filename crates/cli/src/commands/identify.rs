@@ -47,6 +47,20 @@ pub fn load_step(path: &Path) -> Result<LoadedStep> {
     step_from_columns(path.display().to_string(), read_file(path)?)
 }
 
+/// A measured (simulated) record as a located step, named `shown` in errors.
+pub fn step_from_record(shown: String, rec: motor_model::Record) -> Result<LoadedStep> {
+    step_from_columns(
+        shown,
+        RecordColumns {
+            t: rec.t,
+            voltage: rec.voltage,
+            current: rec.current,
+            speed: rec.speed,
+            position: rec.position,
+        },
+    )
+}
+
 /// Finds the step in `cols` (named `shown` in errors) and keeps the samples from it on. Speed
 /// (for the paper method's Ωrm) comes from the `speed` column, or from the `position` column by
 /// central differences; the full fit uses the encoder angle where there is one.

@@ -9,8 +9,7 @@ use motor_model::{MotorParams, StepResponse};
 use serde_json::json;
 
 use crate::args::{MeasurementArgs, MontecarloArgs, SpeedFromArg};
-use crate::commands::identify::{step_from_columns, LoadedStep};
-use crate::record_csv::RecordColumns;
+use crate::commands::identify::{step_from_record, LoadedStep};
 use crate::settings;
 use crate::BadInput;
 
@@ -36,39 +35,59 @@ fn values(p: &MotorParams) -> [f64; 6] {
     ]
 }
 
-fn record(a: &MontecarloArgs, motor: &MotorParams, volts: f64, seed: u64) -> Result<LoadedStep> {
+/// How the simulated logger records a step test.
+#[derive(Debug, Clone, Copy)]
+pub struct Logger {
+    /// Record length \[s\].
+    pub duration_s: f64,
+    /// Sample rate \[Hz\].
+    pub rate_hz: f64,
+    /// ADC resolution \[bits\].
+    pub adc_bits: u8,
+    /// Noise on the analog channels \[LSB\].
+    pub noise_lsb: f64,
+    /// Encoder counts per revolution.
+    pub encoder_cpr: u32,
+}
+
+impl From<&MontecarloArgs> for Logger {
+    fn from(a: &MontecarloArgs) -> Self {
+        Logger {
+            duration_s: a.duration,
+            rate_hz: a.rate,
+            adc_bits: a.adc_bits,
+            noise_lsb: a.noise_lsb,
+            encoder_cpr: a.encoder_cpr,
+        }
+    }
+}
+
+/// A step of `volts` on `motor` recorded by `logger` with noise seed `seed`, located.
+pub fn record(logger: &Logger, motor: &MotorParams, volts: f64, seed: u64) -> Result<LoadedStep> {
     let trace = StepResponse::new(motor, volts)
-        .trace(0.0, a.duration, a.rate)
+        .trace(0.0, logger.duration_s, logger.rate_hz)
         .map_err(|e| BadInput(e.to_string()))?;
     let m = MeasurementArgs {
-        adc_bits: Some(a.adc_bits),
+        adc_bits: Some(logger.adc_bits),
         range_voltage: None,
         range_current: None,
         range_speed: None,
-        noise_lsb: Some(a.noise_lsb),
-        encoder_cpr: Some(a.encoder_cpr),
+        noise_lsb: Some(logger.noise_lsb),
+        encoder_cpr: Some(logger.encoder_cpr),
         speed_from: SpeedFromArg::Encoder,
         seed,
     };
     let rec = settings::measurement(&m, &trace)?
         .apply(&trace)
         .map_err(|e| BadInput(e.to_string()))?;
-    step_from_columns(
-        format!("simulated {volts} V record (seed {seed})"),
-        RecordColumns {
-            t: rec.t,
-            voltage: rec.voltage,
-            current: rec.current,
-            speed: rec.speed,
-            position: rec.position,
-        },
-    )
+    step_from_record(format!("simulated {volts} V record (seed {seed})"), rec)
 }
 
 fn one_run(a: &MontecarloArgs, motor: &MotorParams, i: usize) -> Result<Run> {
     let seed = a.seed.wrapping_add(2 * i as u64);
-    let hv = record(a, motor, a.high_voltage, seed)?;
-    let lv = record(a, motor, a.low_voltage, seed.wrapping_add(1))?;
+    let logger = Logger::from(a);
+    let hv = record(&logger, motor, a.high_voltage, seed)?;
+    let lv = record(&logger, motor, a.low_voltage, seed.wrapping_add(1))?;
     let tests = [hv.test(), lv.test()];
     let truth = values(motor);
     let rel = |p: &MotorParams| {
