@@ -306,25 +306,6 @@ impl LeastSquares for FullProblem {
     }
 }
 
-fn check_series(name: String, y: &[f64], n: usize) -> Result<(), FitError> {
-    if y.len() != n {
-        return Err(FitError::BadData {
-            series: name,
-            reason: format!(
-                "{} samples where the current has {n}: the channels must align",
-                y.len()
-            ),
-        });
-    }
-    if let Some((i, v)) = y.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-        return Err(FitError::BadData {
-            series: name,
-            reason: format!("sample {i} is {v}: remove or repair it"),
-        });
-    }
-    Ok(())
-}
-
 /// Identifies R, L, k, f, J, Ts from `tests` (at least one; the paper uses a high- and a
 /// low-voltage step), starting from `start` (e.g. the paper method's result).
 pub fn identify_full(
@@ -351,28 +332,9 @@ pub fn identify_full(
     let mut weighted = Vec::new();
     let mut n_residuals = 0;
     for (k, t) in tests.iter().enumerate() {
-        let label = |ch: &str| format!("test {} {ch}", k + 1);
+        crate::checks::check_step_test(&format!("test {}", k + 1), t)?;
         let n = t.current.len();
-        if n < 8 {
-            return Err(FitError::BadData {
-                series: label("current"),
-                reason: format!("{n} samples: at least 8 are needed"),
-            });
-        }
-        if !(t.dt.is_finite() && t.dt > 0.0 && t.t_first.is_finite() && t.t_first >= 0.0) {
-            return Err(FitError::BadData {
-                series: label("time"),
-                reason: format!("first sample {} s after the step, period {} s: expected t_first ≥ 0 and a positive period", t.t_first, t.dt),
-            });
-        }
-        if !(t.volts.is_finite() && t.volts != 0.0) {
-            return Err(FitError::BadData {
-                series: label("voltage"),
-                reason: format!("step of {} V: expected a non-zero finite step", t.volts),
-            });
-        }
         let mut channels = Vec::new();
-        check_series(label("current"), t.current, n)?;
         channels.push(ChannelData {
             kind: Channel::Current,
             data: t.current.to_vec(),
@@ -380,7 +342,6 @@ pub fn identify_full(
         });
         match (t.position, t.speed) {
             (Some(angle), _) => {
-                check_series(label("position"), angle, n)?;
                 let times: Vec<f64> = (0..n).map(|i| t.t_first + i as f64 * t.dt).collect();
                 let data = motor_model::central_difference(&times, angle);
                 let sigma = noise_std(&data);
@@ -391,7 +352,6 @@ pub fn identify_full(
                 });
             }
             (None, Some(speed)) => {
-                check_series(label("speed"), speed, n)?;
                 channels.push(ChannelData {
                     kind: Channel::Speed,
                     data: speed.to_vec(),

@@ -24,6 +24,7 @@
 //! ```
 #![warn(missing_docs)]
 
+mod checks;
 mod error;
 mod full_model;
 mod lm;
@@ -34,6 +35,7 @@ mod stats;
 mod steady_fit;
 mod step_location;
 
+pub use checks::{check_settled, check_step_test, MIN_SAMPLES, SETTLED_FRACTION};
 pub use error::FitError;
 pub use full_model::{
     identify_full, noise_std, Channel, ChannelQuality, FullFit, StepTest, PARAM_NAMES, PARAM_UNITS,

@@ -50,7 +50,7 @@ pub trait LeastSquares {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Termination {
     /// Relative cost reduction (achieved by the last step, or predicted for the next one) below
-    /// `ftol`, or relative step below `xtol`.
+    /// `ftol`, or relative step (the last one taken, or the next Gauss–Newton one) below `xtol`.
     Converged,
     /// Gradient `‖Jᵀr‖∞` below `gtol` (an exact fit).
     ZeroGradient,
@@ -269,13 +269,24 @@ impl<P: LeastSquares> Solver<ArgminProblem<'_, P>, LmState> for LevenbergMarquar
         // Predicted reduction of the undamped Gauss–Newton step, ½ Jᵀr·(JᵀJ)⁻¹Jᵀr: when the
         // local quadratic model says less than ftol·C is left to gain, the fit has converged
         // (MINPACK's test; the actual reduction alone stalls on rounding at a noisy optimum).
-        let predicted = normal
+        // The undamped Gauss–Newton step and the reduction the local quadratic model predicts
+        // for it, ½ Jᵀr·(JᵀJ)⁻¹Jᵀr. When that reduction is below ftol·C, or the step itself is
+        // below xtol relative to the parameters, there is nothing left to gain: converged
+        // (MINPACK's tests; the actual reduction alone stalls on rounding at an optimum).
+        let p_norm = p.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let gauss_newton = normal
             .jtj
             .clone()
             .cholesky()
-            .map(|chol| 0.5 * normal.jtr.dot(&chol.solve(&normal.jtr)))
+            .map(|chol| chol.solve(&(-&normal.jtr)));
+        let predicted = gauss_newton
+            .as_ref()
+            .map(|step| -0.5 * normal.jtr.dot(step))
             .filter(|p| p.is_finite());
-        if predicted.is_some_and(|p| p <= self.settings.ftol * cost) {
+        let tiny_step = gauss_newton
+            .as_ref()
+            .is_some_and(|step| step.norm() <= self.settings.xtol * (p_norm + self.settings.xtol));
+        if tiny_step || predicted.is_some_and(|p| p <= self.settings.ftol * cost) {
             self.stop = Some(Termination::Converged);
             return Ok((state, None));
         }
@@ -303,7 +314,6 @@ impl<P: LeastSquares> Solver<ArgminProblem<'_, P>, LmState> for LevenbergMarquar
                     None
                 };
                 if let Some(tn) = trial_normal {
-                    let p_norm = p.iter().map(|v| v * v).sum::<f64>().sqrt();
                     self.last_step_rel = delta.norm() / (p_norm + self.settings.xtol);
                     self.last_cost_rel = (cost - tn.cost) / cost.max(f64::MIN_POSITIVE);
                     self.lambda = (self.lambda / 3.0).max(1e-15);

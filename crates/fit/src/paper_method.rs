@@ -213,6 +213,8 @@ pub fn identify_paper(
         series: series.into(),
         reason,
     };
+    crate::checks::check_step_test("high-voltage test", high)?;
+    crate::checks::check_step_test("low-voltage test", low)?;
     let (Some(&i_rm), Some(&i_rb)) = (high.current.last(), low.current.last()) else {
         return Err(bad("step tests", "a record has no samples".into()));
     };
@@ -223,6 +225,9 @@ pub fn identify_paper(
         )
     })?;
     let omega_rm = speed.last().copied().unwrap_or(f64::NAN);
+    crate::checks::check_settled("high-voltage test", "current", high.current, high.dt)?;
+    crate::checks::check_settled("high-voltage test", "speed", speed, high.dt)?;
+    crate::checks::check_settled("low-voltage test", "current", low.current, low.dt)?;
     if !(i_rm.is_finite() && i_rm > 0.0) {
         return Err(bad(
             "high-voltage current",

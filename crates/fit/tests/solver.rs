@@ -7,13 +7,10 @@ use motor_model::paper::normalized_current_33;
 use nalgebra::{DMatrix, DVector};
 use proptest::prelude::*;
 
-/// Residuals of (33) evaluated directly (no recurrence), for finite differences.
-fn residuals(p: &Params33, t_first: f64, dt: f64, y: &[f64]) -> Vec<f64> {
-    y.iter()
-        .enumerate()
-        .map(|(i, yi)| {
-            normalized_current_33(p.alpha, p.sigma, p.omega_a, t_first + i as f64 * dt) - yi
-        })
+/// The model (33) evaluated directly (no recurrence), for finite differences.
+fn model(p: &Params33, t_first: f64, dt: f64, n: usize) -> Vec<f64> {
+    (0..n)
+        .map(|i| normalized_current_33(p.alpha, p.sigma, p.omega_a, t_first + i as f64 * dt))
         .collect()
 }
 
@@ -33,7 +30,7 @@ proptest! {
         let y: Vec<f64> = (0..n).map(|i| normalized_current_33(alpha * 1.1, sigma * 0.9, ratio * sigma, i as f64 * dt) + 0.01 * rng.normal()).collect();
         let record = Record33 { t_first: 0.0, dt, normalized_current: &y };
         let analytic = record.normal_equations(&[p.alpha, p.sigma, p.omega_a]).unwrap();
-        let r = residuals(&p, 0.0, dt, &y);
+        let r: Vec<f64> = model(&p, 0.0, dt, n).iter().zip(&y).map(|(m, yi)| m - yi).collect();
         let mut jac = DMatrix::zeros(n, 3);
         for k in 0..3 {
             let mut up = [p.alpha, p.sigma, p.omega_a];
@@ -43,9 +40,11 @@ proptest! {
             down[k] -= h;
             let pu = Params33 { alpha: up[0], sigma: up[1], omega_a: up[2] };
             let pd = Params33 { alpha: down[0], sigma: down[1], omega_a: down[2] };
-            let (ru, rd) = (residuals(&pu, 0.0, dt, &y), residuals(&pd, 0.0, dt, &y));
+            // Difference the model, not the residuals: the data may be far larger than the
+            // model (here up to ~1e7), and r(p+h) − r(p−h) would cancel away every digit.
+            let (mu, md) = (model(&pu, 0.0, dt, n), model(&pd, 0.0, dt, n));
             for i in 0..n {
-                jac[(i, k)] = (ru[i] - rd[i]) / (2.0 * h);
+                jac[(i, k)] = (mu[i] - md[i]) / (2.0 * h);
             }
         }
         let jtj = jac.transpose() * &jac;
