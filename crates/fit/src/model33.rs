@@ -419,7 +419,7 @@ const COARSE_SAMPLES: usize = 2000;
 
 /// Fits Eq. (33) to `record` from `start`.
 ///
-/// Coarse to fine: a record longer than 4 × [`COARSE_SAMPLES`] is first fitted decimated (every
+/// Coarse to fine: a record longer than 8,000 samples is first fitted decimated to about 2,000 (every
 /// k-th sample), which converges in a few cheap iterations, then polished on the full record.
 pub fn fit_33(
     record: &Record33<'_>,
