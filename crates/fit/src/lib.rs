@@ -45,8 +45,9 @@ pub use lm::{
 };
 pub use model33::{fit_33, Fit33, Params33, Record33};
 pub use paper_method::{
-    from_high_voltage, identify_paper, suggested_low_voltage_45, tau_m_as_printed_37,
-    with_low_voltage, HighVoltageResult, PaperIdentification, TwoTestFriction,
+    from_high_voltage, identify_paper, speed_check_c8, suggested_low_voltage_45,
+    tau_m_as_printed_37, with_low_voltage, HighVoltageResult, PaperIdentification, SpeedCheck,
+    TwoTestFriction,
 };
 pub use start::steady_state_start;
 pub use stats::{

@@ -199,11 +199,14 @@ pub struct PaperIdentification {
     /// `Irm`, `Ωrm`, `Irb` used \[A, rad/s, A\]: the last samples of the records, as the paper
     /// took its Table 2 at t = 50 s.
     pub steady_values: [f64; 3],
+    /// The tachometer check (C.8) of ωn and ζ from the speed, or why it could not be made.
+    pub speed_check: Result<SpeedCheck, FitError>,
 }
 
 /// Runs the paper's method: normalise the high-voltage current by its last sample, fit (33)
 /// (from the paper's start β0 = [1; 1; 1], Appendix A), apply (34)–(44) with the last speed
-/// sample as Ωrm, then (46)–(51) with the low-voltage test's last current sample.
+/// sample as Ωrm, then (46)–(51) with the low-voltage test's last current sample, and finally
+/// the tachometer check (C.8) ([`speed_check_c8`]).
 pub fn identify_paper(
     high: &crate::full_model::StepTest<'_>,
     low: &crate::full_model::StepTest<'_>,
@@ -268,11 +271,178 @@ pub fn identify_paper(
         lv.ts_nm,
     )
     .map_err(|e| domain("Eqs. (38)-(48)", e.to_string()))?;
+    let speed_check = motor_model::breakaway_time(&params, high.volts)
+        .ok_or_else(|| {
+            domain(
+                "Eq. (C.8)",
+                "the identified motor does not break away at the high voltage".into(),
+            )
+        })
+        .and_then(|t0| speed_check_c8(high, t0, fit.params, settings));
     Ok(PaperIdentification {
         fit_33: fit,
         high: hv,
         low: lv,
         params,
         steady_values: [i_rm, omega_rm, i_rb],
+        speed_check,
     })
+}
+
+/// The paper's tachometer check (Sec. 2.4, Appendix C): (C.8) fitted to the normalised
+/// high-voltage speed gives ωn and ζ independently of the current.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpeedCheck {
+    /// ωn \[rad/s\] from the speed record.
+    pub omega_n: f64,
+    /// ζ [-] from the speed record.
+    pub zeta: f64,
+    /// RMS of `Ω/Ωrm − (C.8)` at the fit [-].
+    pub rms: f64,
+    /// Why the (C.8) fit stopped.
+    pub termination: crate::lm::Termination,
+}
+
+/// `Ω/Ωr` samples after breakaway for the (C.8) fit; τ of sample i is `tau_first + i·dt`.
+struct SpeedC8<'a> {
+    tau_first: f64,
+    dt: f64,
+    y: &'a [f64],
+}
+
+impl SpeedC8<'_> {
+    /// Visits `(y, model, ∂/∂σ, ∂/∂ωa)` per sample. With `γ sinh(x + sinh⁻¹(1/γ)) =
+    /// cosh x + (σ/ωa) sinh x` (because `γ² + 1 = σ²/ωa²`), (C.8) is
+    /// `1 − e^{−στ}(cosh ωaτ + (σ/ωa) sinh ωaτ)`; the decayed hyperbolic functions are formed
+    /// from the two modes `e^{−(σ∓ωa)τ}` so nothing overflows.
+    fn visit(&self, p: &[f64], mut f: impl FnMut(f64, f64, f64, f64)) -> bool {
+        let (sigma, wa) = match *p {
+            [s, w] if s > w && w > 0.0 => (s, w),
+            _ => return false,
+        };
+        let ratio = sigma / wa;
+        for (i, &y) in self.y.iter().enumerate() {
+            let tau = self.tau_first + i as f64 * self.dt;
+            let slow = (-(sigma - wa) * tau).exp();
+            let fast = (-(sigma + wa) * tau).exp();
+            let (c, s) = (0.5 * (slow + fast), 0.5 * (slow - fast));
+            let model = 1.0 - (c + ratio * s);
+            // d/dσ: the decay e^{−στ} gives τ(c + ratio s); ratio = σ/ωa gives s/ωa.
+            let d_sigma = tau * (c + ratio * s) - s / wa;
+            // d/dωa of (c + (σ/ωa) s), with dc/dωa = τ s, ds/dωa = τ c (the decay is in σ).
+            let d_wa = -(tau * s + ratio * tau * c - ratio / wa * s);
+            f(y, model, d_sigma, d_wa);
+        }
+        true
+    }
+}
+
+impl crate::lm::LeastSquares for SpeedC8<'_> {
+    fn n_params(&self) -> usize {
+        2
+    }
+    fn cost(&self, p: &[f64]) -> Option<f64> {
+        let mut cost = 0.0;
+        self.visit(p, |y, m, _, _| cost += (m - y).powi(2))
+            .then_some(0.5 * cost)
+            .filter(|c| c.is_finite())
+    }
+    fn normal_equations(&self, p: &[f64]) -> Option<crate::lm::NormalEquations> {
+        let mut jtj = [0.0; 3];
+        let mut jtr = [0.0; 2];
+        let mut cost = 0.0;
+        let ok = self.visit(p, |y, m, j0, j1| {
+            let r = m - y;
+            cost += r * r;
+            jtr[0] += j0 * r;
+            jtr[1] += j1 * r;
+            jtj[0] += j0 * j0;
+            jtj[1] += j0 * j1;
+            jtj[2] += j1 * j1;
+        });
+        ok.then(|| crate::lm::NormalEquations {
+            jtj: nalgebra::DMatrix::from_row_slice(2, 2, &[jtj[0], jtj[1], jtj[1], jtj[2]]),
+            jtr: nalgebra::DVector::from_row_slice(&jtr),
+            cost: 0.5 * cost,
+            n_residuals: self.y.len(),
+        })
+    }
+}
+
+/// Fits (C.8) to the high-voltage speed normalised by its last sample, with τ measured from the
+/// breakaway instant `t0_s` \[s\] (Eq. (11) of the identified motor), starting from the (σ, ωa)
+/// of the current fit. Returns ωn, ζ from the speed alone.
+pub fn speed_check_c8(
+    high: &crate::full_model::StepTest<'_>,
+    t0_s: f64,
+    start: Params33,
+    settings: crate::lm::LmSettings,
+) -> Result<SpeedCheck, FitError> {
+    let speed = high.speed.ok_or_else(|| FitError::BadData {
+        series: "high-voltage speed".into(),
+        reason: "the (C.8) check needs a speed or position channel".into(),
+    })?;
+    let omega_rm = speed.last().copied().unwrap_or(f64::NAN);
+    if !(omega_rm.is_finite() && omega_rm != 0.0) {
+        return Err(domain(
+            "Eq. (C.8)",
+            format!("final speed {omega_rm} rad/s: the motor must turn"),
+        ));
+    }
+    // First sample after breakaway.
+    let first = (((t0_s - high.t_first) / high.dt).floor() + 1.0).max(0.0) as usize;
+    let y: Vec<f64> = speed.iter().skip(first).map(|w| w / omega_rm).collect();
+    let problem = SpeedC8 {
+        tau_first: high.t_first + first as f64 * high.dt - t0_s,
+        dt: high.dt,
+        y: &y,
+    };
+    let report = crate::lm::solve(&problem, &[start.sigma, start.omega_a], settings)?;
+    let (sigma, wa) = (report.params[0], report.params[1]);
+    let omega_n = (sigma * sigma - wa * wa).sqrt();
+    Ok(SpeedCheck {
+        omega_n,
+        zeta: sigma / omega_n,
+        rms: (2.0 * report.normal.cost / y.len().max(1) as f64).sqrt(),
+        termination: report.termination,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lm::LeastSquares;
+
+    /// Jᵀr of the (C.8) problem equals the gradient of its cost by central differences
+    /// (relative 1e-6: h = 1e-7 relative, cost smooth).
+    #[test]
+    fn speed_c8_gradient_matches_finite_differences() {
+        let y: Vec<f64> = (0..3000)
+            .map(|i| {
+                let tau = 0.01 * i as f64;
+                motor_model::paper::normalized_speed_c8(0.9, 0.52, 0.39, tau)
+                    + 1e-3 * (i as f64).sin()
+            })
+            .collect();
+        let problem = SpeedC8 {
+            tau_first: 0.0,
+            dt: 0.01,
+            y: &y,
+        };
+        for p in [[0.5, 0.4], [0.53, 0.38], [1.2, 0.3]] {
+            let ne = problem.normal_equations(&p).unwrap();
+            for k in 0..2 {
+                let h = 1e-7 * p[k];
+                let (mut up, mut down) = (p, p);
+                up[k] += h;
+                down[k] -= h;
+                let fd = (problem.cost(&up).unwrap() - problem.cost(&down).unwrap()) / (2.0 * h);
+                assert!(
+                    (fd - ne.jtr[k]).abs() <= 1e-6 * fd.abs().max(1e-9),
+                    "{p:?} [{k}]: {fd} vs {}",
+                    ne.jtr[k]
+                );
+            }
+        }
+    }
 }

@@ -117,6 +117,11 @@ fn paper_json(paper: &PaperIdentification) -> Value {
         "eq50_KE": paper.low.k_e,
         "eq51_Ks": paper.low.k_s,
         "steady_values": {"Irm": paper.steady_values[0], "Wrm": paper.steady_values[1], "Irb": paper.steady_values[2]},
+        "c8_speed_check": match &paper.speed_check {
+            Ok(c) => json!({"wn": c.omega_n, "zeta": c.zeta, "rms": c.rms, "termination": c.termination.text(),
+                            "wn_from_current": h.omega_n, "zeta_from_current": h.zeta}),
+            Err(e) => json!({"failed": e.to_string()}),
+        },
     })
 }
 
@@ -147,6 +152,10 @@ pub fn report_json(
             "converged": f.termination.converged(),
             "iterations": f.iterations,
             "weighted_cost": f.cost,
+            "correlation": f.correlation.as_ref().map(|c| json!({
+                "order": PARAM_NAMES,
+                "matrix": (0..6).map(|i| (0..6).map(|j| c[(i, j)]).collect::<Vec<f64>>()).collect::<Vec<_>>(),
+            })),
             "channels": f.quality.iter().map(|q| json!({
                 "record": files[q.test], "channel": q.channel.name(), "rms_residual": q.rms_residual,
                 "nrmse_fit_percent": q.nrmse_fit_percent, "noise_std": q.noise_std,
@@ -242,6 +251,15 @@ fn print_table(
                     paper.fit_33.report.termination.text(), paper.fit_33.report.iterations
                 )
             }
+        }
+    }
+    if let Ok(paper) = paper {
+        match &paper.speed_check {
+            Ok(c) => println!(
+                "(C.8) speed check: wn = {:.6} rad/s, zeta = {:.6} from the speed; {:.6}, {:.6} from the current (Eqs. (35), (36))",
+                c.omega_n, c.zeta, paper.high.omega_n, paper.high.zeta
+            ),
+            Err(e) => println!("(C.8) speed check not made: {e}"),
         }
     }
     if let (Err(why), Some(_)) = (paper, full) {
