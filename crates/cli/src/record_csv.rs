@@ -10,23 +10,8 @@ use motor_model::Record;
 
 use crate::BadInput;
 
-/// Columns of a record as read from a file, SI units.
-#[derive(Debug, Clone, Default)]
-pub struct RecordColumns {
-    /// `t` \[s\].
-    pub t: Vec<f64>,
-    /// `voltage` \[V\].
-    pub voltage: Vec<f64>,
-    /// `current` \[A\].
-    pub current: Vec<f64>,
-    /// `speed` \[rad/s\], if present.
-    pub speed: Option<Vec<f64>>,
-    /// `position` \[rad\], if present.
-    pub position: Option<Vec<f64>>,
-}
-
 /// Reads a record file. Every problem is a [`BadInput`] naming the file, the line and the value.
-pub fn read_file(path: &Path) -> Result<RecordColumns> {
+pub fn read_file(path: &Path) -> Result<Record> {
     let shown = path.display();
     let bytes = std::fs::read(path).map_err(|e| BadInput(format!("{shown}: cannot read ({e})")))?;
     let text = String::from_utf8(bytes).map_err(|e| {
@@ -39,7 +24,7 @@ pub fn read_file(path: &Path) -> Result<RecordColumns> {
 }
 
 /// Parses record text; errors carry the 1-based line number.
-fn parse(text: &str) -> std::result::Result<RecordColumns, (usize, String)> {
+fn parse(text: &str) -> std::result::Result<Record, (usize, String)> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut lines = text
         .lines()
@@ -70,10 +55,10 @@ fn parse(text: &str) -> std::result::Result<RecordColumns, (usize, String)> {
     };
     let (it, iv, ic) = (required("t")?, required("voltage")?, required("current")?);
     let (is, ip) = (find("speed"), find("position"));
-    let mut cols = RecordColumns {
+    let mut cols = Record {
         speed: is.map(|_| Vec::new()),
         position: ip.map(|_| Vec::new()),
-        ..RecordColumns::default()
+        ..Record::default()
     };
     let mut values = Vec::with_capacity(names.len());
     let mut last_t = f64::NEG_INFINITY;

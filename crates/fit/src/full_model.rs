@@ -373,18 +373,7 @@ pub fn identify_full(
         tests: weighted,
         n_residuals,
     };
-    let p = start;
-    let theta0: Vec<f64> = [
-        p.r_ohm,
-        p.l_henry,
-        p.k_nm_per_a,
-        p.f_nms_per_rad,
-        p.j_kgm2,
-        p.ts_nm,
-    ]
-    .iter()
-    .map(|v| v.ln())
-    .collect();
+    let theta0: Vec<f64> = start.values().iter().map(|v| v.ln()).collect();
     let first = solve(&problem, &theta0, settings)?;
     // Second stage: weight each channel by its own residual RMS at the first solution, so that
     // every channel's weighted residuals have unit variance and the pooled variance behind the
@@ -420,10 +409,7 @@ pub fn identify_full(
     };
     let values: [f64; 6] = params_of::<f64>(&report.params, |v, _| v)
         .ok_or_else(|| FitError::Solver("parameters left the representable range".into()))?;
-    let params = MotorParams::new(
-        values[0], values[1], values[2], values[3], values[4], values[5],
-    )
-    .map_err(|e| FitError::Solver(e.to_string()))?;
+    let params = MotorParams::from_values(values).map_err(|e| FitError::Solver(e.to_string()))?;
     // Intervals from the Newey–West sandwich (residuals of logged signals are rarely white),
     // then the delta method σ_p = p σ_θ back to SI units.
     let unc = problem

@@ -27,10 +27,40 @@ pub struct Uncertainty {
 /// Uncertainty from the normal equations at the solution; `None` when `JᵀJ` is singular or
 /// there are no degrees of freedom.
 pub fn uncertainty(normal: &NormalEquations) -> Option<Uncertainty> {
-    let p = normal.jtj.nrows();
-    let dof = normal.n_residuals.checked_sub(p).filter(|&d| d > 0)?;
+    let dof = degrees_of_freedom(normal)?;
     let s2 = 2.0 * normal.cost / dof as f64;
-    // Invert with column scaling for conditioning: (D JᵀJ D)⁻¹ then rescale.
+    let covariance = inverse_jtj(normal)? * s2;
+    from_covariance(covariance, dof, s2)
+}
+
+/// Uncertainty from the sandwich `(JᵀJ)⁻¹ S (JᵀJ)⁻¹ · n/(n − p)`, where `S` is a
+/// heteroskedasticity- and autocorrelation-consistent estimate of the covariance of the score
+/// `Jᵀr` (Newey–West). Unlike [`uncertainty`] it stays honest when the residuals are correlated
+/// in time (noise that is not white: quantisation of a slowly moving signal, differentiated
+/// encoder counts, filtering). `normal` gives `JᵀJ` and the residual count.
+pub fn sandwich_uncertainty(
+    normal: &NormalEquations,
+    score_cov: &DMatrix<f64>,
+) -> Option<Uncertainty> {
+    let dof = degrees_of_freedom(normal)?;
+    let h_inv = inverse_jtj(normal)?;
+    let small_sample = normal.n_residuals as f64 / dof as f64;
+    let covariance = (&h_inv * score_cov * &h_inv) * small_sample;
+    from_covariance(covariance, dof, 2.0 * normal.cost / dof as f64)
+}
+
+/// `n − p`, if positive.
+fn degrees_of_freedom(normal: &NormalEquations) -> Option<usize> {
+    normal
+        .n_residuals
+        .checked_sub(normal.jtj.nrows())
+        .filter(|&d| d > 0)
+}
+
+/// `(JᵀJ)⁻¹`, inverted with column scaling `D (D JᵀJ D)⁻¹ D`, `D = diag(JᵀJ)^{-1/2}`, so that
+/// parameters of very different magnitudes do not ruin the conditioning.
+fn inverse_jtj(normal: &NormalEquations) -> Option<DMatrix<f64>> {
+    let p = normal.jtj.nrows();
     let d: Vec<f64> = (0..p)
         .map(|i| {
             let v = normal.jtj[(i, i)];
@@ -43,58 +73,16 @@ pub fn uncertainty(normal: &NormalEquations) -> Option<Uncertainty> {
         .collect();
     let scaled = DMatrix::from_fn(p, p, |i, j| normal.jtj[(i, j)] * d[i] * d[j]);
     let inv = scaled.try_inverse()?;
-    let covariance = DMatrix::from_fn(p, p, |i, j| s2 * inv[(i, j)] * d[i] * d[j]);
-    let std_error: Vec<f64> = (0..p).map(|i| covariance[(i, i)].max(0.0).sqrt()).collect();
-    if std_error.iter().any(|s| !s.is_finite()) {
-        return None;
-    }
-    let t = student_t_quantile(0.975, dof as f64);
-    let correlation = DMatrix::from_fn(p, p, |i, j| {
-        let den = std_error[i] * std_error[j];
-        if den > 0.0 {
-            covariance[(i, j)] / den
-        } else if i == j {
-            1.0
-        } else {
-            0.0
-        }
-    });
-    Some(Uncertainty {
-        ci95_half_width: std_error.iter().map(|s| t * s).collect(),
-        std_error,
-        covariance,
-        correlation,
-        residual_variance: s2,
-        dof,
-    })
+    Some(DMatrix::from_fn(p, p, |i, j| inv[(i, j)] * d[i] * d[j]))
 }
 
-/// Uncertainty from the sandwich `(JᵀJ)⁻¹ S (JᵀJ)⁻¹ · n/(n − p)`, where `S` is a
-/// heteroskedasticity- and autocorrelation-consistent estimate of the covariance of the score
-/// `Jᵀr` (Newey–West). Unlike [`uncertainty`] it stays honest when the residuals are correlated
-/// in time (noise that is not white: quantisation of a slowly moving signal, differentiated
-/// encoder counts, filtering). `normal` gives `JᵀJ` and the residual count.
-pub fn sandwich_uncertainty(
-    normal: &NormalEquations,
-    score_cov: &DMatrix<f64>,
+/// Standard errors, Student-t 95 % half-widths and correlations of a covariance matrix.
+fn from_covariance(
+    covariance: DMatrix<f64>,
+    dof: usize,
+    residual_variance: f64,
 ) -> Option<Uncertainty> {
-    let p = normal.jtj.nrows();
-    let dof = normal.n_residuals.checked_sub(p).filter(|&d| d > 0)?;
-    let d: Vec<f64> = (0..p)
-        .map(|i| {
-            let v = normal.jtj[(i, i)];
-            if v > 0.0 {
-                1.0 / v.sqrt()
-            } else {
-                1.0
-            }
-        })
-        .collect();
-    let scaled = DMatrix::from_fn(p, p, |i, j| normal.jtj[(i, j)] * d[i] * d[j]);
-    let inv_scaled = scaled.try_inverse()?;
-    let h_inv = DMatrix::from_fn(p, p, |i, j| inv_scaled[(i, j)] * d[i] * d[j]);
-    let small_sample = normal.n_residuals as f64 / dof as f64;
-    let covariance = (&h_inv * score_cov * &h_inv) * small_sample;
+    let p = covariance.nrows();
     let std_error: Vec<f64> = (0..p).map(|i| covariance[(i, i)].max(0.0).sqrt()).collect();
     if std_error.iter().any(|s| !s.is_finite()) {
         return None;
@@ -115,7 +103,7 @@ pub fn sandwich_uncertainty(
         std_error,
         covariance,
         correlation,
-        residual_variance: 2.0 * normal.cost / dof as f64,
+        residual_variance,
         dof,
     })
 }

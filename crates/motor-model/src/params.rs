@@ -100,6 +100,24 @@ impl MotorParams {
         Ok(())
     }
 
+    /// The parameters as `[R, L, k, f, J, Ts]` (SI units), the order every array of
+    /// parameters in this workspace uses.
+    pub fn values(&self) -> [f64; 6] {
+        [
+            self.r_ohm,
+            self.l_henry,
+            self.k_nm_per_a,
+            self.f_nms_per_rad,
+            self.j_kgm2,
+            self.ts_nm,
+        ]
+    }
+
+    /// Builds from `[R, L, k, f, J, Ts]` (SI units), validated as by [`MotorParams::new`].
+    pub fn from_values(v: [f64; 6]) -> Result<Self, ModelError> {
+        MotorParams::new(v[0], v[1], v[2], v[3], v[4], v[5])
+    }
+
     /// `R f + k²` \[N·m·Ω·s/rad … = V·s·N·m/(A·rad)\], the denominator shared by (4), (16), (17), (20).
     pub fn rf_plus_k2(&self) -> f64 {
         self.r_ohm * self.f_nms_per_rad + self.k_nm_per_a * self.k_nm_per_a

@@ -22,10 +22,10 @@
 
 use serde::Serialize;
 
-use crate::error::{non_negative, positive, ModelError};
+use crate::error::{non_negative, ModelError};
 use crate::params::MotorParams;
 use crate::real::Real;
-use crate::sim::simulator::{Trace, MAX_SAMPLES};
+use crate::sim::simulator::{sample_grid, Trace};
 use crate::steady::{breakaway_generic, steady_generic};
 
 /// Samples between exact re-evaluations of the grid recurrence (bounds rounding drift to
@@ -127,36 +127,14 @@ pub struct StepResponse<T = f64> {
 impl StepResponse<f64> {
     /// Prepares the response of `params` to a step of `e_volt` \[V\].
     pub fn new(params: &MotorParams, e_volt: f64) -> Self {
-        let p = params;
-        StepResponse::from_values(
-            [
-                p.r_ohm,
-                p.l_henry,
-                p.k_nm_per_a,
-                p.f_nms_per_rad,
-                p.j_kgm2,
-                p.ts_nm,
-            ],
-            e_volt,
-        )
+        StepResponse::from_values(params.values(), e_volt)
     }
 
     /// A record of this step applied at `at_s` \[s\] (0 V before), sampled at `rate_hz` \[Hz\]
     /// from `t = 0` to `duration_s` \[s\]: the analytic counterpart of [`crate::Simulator::run`].
     pub fn trace(&self, at_s: f64, duration_s: f64, rate_hz: f64) -> Result<Trace, ModelError> {
         let at_s = non_negative("step instant", at_s)?;
-        let duration_s = positive("duration", duration_s)?;
-        let rate_hz = positive("sample rate", rate_hz)?;
-        let n_f = (duration_s * rate_hz).floor() + 1.0;
-        if n_f > MAX_SAMPLES as f64 {
-            return Err(ModelError::InvalidSetting {
-                name: "duration × rate".into(),
-                value: n_f,
-                expected: "at most 10,000,000 samples: shorten the record or lower the rate",
-            });
-        }
-        let n = n_f as usize;
-        let dt = 1.0 / rate_hz;
+        let (n, dt) = sample_grid(duration_s, rate_hz)?;
         let t: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
         let before = t.iter().take_while(|&&ti| ti < at_s).count();
         let mut states = vec![MotorState::default(); n];
@@ -182,7 +160,8 @@ impl StepResponse<f64> {
 }
 
 impl<T: Real> StepResponse<T> {
-    /// The response for parameters `[R, L, k, f, J, Ts]` (SI units, in any [`Real`] scalar) to a
+    /// The response for parameters `[R, L, k, f, J, Ts]` (SI units, in any [`Real`] scalar; the
+    /// order of [`MotorParams::values`]) to a
     /// step of `e_volt` \[V\]. The parameters are trusted: validate them with
     /// [`MotorParams::validate`] first.
     pub fn from_values(params: [T; 6], e_volt: f64) -> Self {

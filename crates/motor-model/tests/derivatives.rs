@@ -3,17 +3,6 @@
 use motor_model::{Dual, MotorParams, MotorState, StepResponse};
 use proptest::prelude::*;
 
-fn values(p: &MotorParams) -> [f64; 6] {
-    [
-        p.r_ohm,
-        p.l_henry,
-        p.k_nm_per_a,
-        p.f_nms_per_rad,
-        p.j_kgm2,
-        p.ts_nm,
-    ]
-}
-
 proptest! {
     #![proptest_config(ProptestConfig { cases: 128, ..ProptestConfig::default() })]
 
@@ -30,7 +19,7 @@ proptest! {
         let f = j / (tau_e * tau_m_over_e);
         let ts = rho * k * e / r;
         let motor = MotorParams::new(r, l, k, f, j, ts).unwrap();
-        let base = values(&motor);
+        let base = motor.values();
         let duals: [Dual<6>; 6] = std::array::from_fn(|i| Dual::variable(base[i], i));
         let exact = StepResponse::from_values(duals, e);
         let t0 = exact.breakaway_time().unwrap().v;

@@ -122,17 +122,6 @@ pub fn run(a: &DemoArgs) -> Result<()> {
     Ok(())
 }
 
-fn values(p: &MotorParams) -> [f64; 6] {
-    [
-        p.r_ohm,
-        p.l_henry,
-        p.k_nm_per_a,
-        p.f_nms_per_rad,
-        p.j_kgm2,
-        p.ts_nm,
-    ]
-}
-
 /// Identification on the demo's records: the paper's method against its Tables 3 and 4, then
 /// the full model, then both through the paper's logger.
 fn identification_story(motor: &MotorParams, records: &[(f64, Input, Trace)]) -> Result<()> {
@@ -234,7 +223,7 @@ fn identification_story(motor: &MotorParams, records: &[(f64, Input, Trace)]) ->
 }
 
 fn print_errors(motor: &MotorParams, paper: &PaperIdentification, full: &FullFit) {
-    let (truth, p, f) = (values(motor), values(&paper.params), values(&full.params));
+    let (truth, p, f) = (motor.values(), paper.params.values(), full.params.values());
     println!(
         "  {:<3} {:>9} {:>15} {:>15}   full 95% CI contains truth",
         "", "truth", "paper (error)", "full (rel. err)"

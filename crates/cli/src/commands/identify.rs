@@ -7,11 +7,11 @@ use fit::{
     fit_apparent_resistance, identify_full, identify_paper, locate_step, steady_state_start,
     FullFit, LmSettings, PaperIdentification, StepTest, PARAM_NAMES, PARAM_UNITS,
 };
-use motor_model::{central_difference, Derived, MotorParams};
+use motor_model::{central_difference, Derived, Record};
 use serde_json::{json, Value};
 
 use crate::args::{IdentifyArgs, MethodArg};
-use crate::record_csv::{read_file, RecordColumns};
+use crate::record_csv::read_file;
 use crate::{BadInput, NotConverged};
 
 /// A 95 % interval wider than this fraction of the value marks a poorly determined parameter.
@@ -44,27 +44,13 @@ impl LoadedStep {
 
 /// Reads `path`, finds the step and keeps the samples from it on.
 pub fn load_step(path: &Path) -> Result<LoadedStep> {
-    step_from_columns(path.display().to_string(), read_file(path)?)
+    step_from_record(path.display().to_string(), read_file(path)?)
 }
 
-/// A measured (simulated) record as a located step, named `shown` in errors.
-pub fn step_from_record(shown: String, rec: motor_model::Record) -> Result<LoadedStep> {
-    step_from_columns(
-        shown,
-        RecordColumns {
-            t: rec.t,
-            voltage: rec.voltage,
-            current: rec.current,
-            speed: rec.speed,
-            position: rec.position,
-        },
-    )
-}
-
-/// Finds the step in `cols` (named `shown` in errors) and keeps the samples from it on. Speed
+/// Finds the step in a record (named `shown` in errors) and keeps the samples from it on. Speed
 /// (for the paper method's Ωrm) comes from the `speed` column, or from the `position` column by
 /// central differences; the full fit uses the encoder angle where there is one.
-pub fn step_from_columns(shown: String, cols: RecordColumns) -> Result<LoadedStep> {
+pub fn step_from_record(shown: String, cols: Record) -> Result<LoadedStep> {
     let loc = locate_step(&cols.t, &cols.voltage).map_err(|e| BadInput(format!("{shown}: {e}")))?;
     let from = loc.index;
     let speed = match (&cols.speed, &cols.position) {
@@ -93,17 +79,6 @@ fn sig(x: f64) -> String {
     } else {
         format!("{x:.6e}")
     }
-}
-
-fn values(p: &MotorParams) -> [f64; 6] {
-    [
-        p.r_ohm,
-        p.l_henry,
-        p.k_nm_per_a,
-        p.f_nms_per_rad,
-        p.j_kgm2,
-        p.ts_nm,
-    ]
 }
 
 fn paper_json(paper: &PaperIdentification) -> Value {
@@ -137,7 +112,7 @@ pub fn report_json(
         (None, Ok(p)) => p.params,
         (None, Err(_)) => return Value::Null,
     };
-    let v = values(&params);
+    let v = params.values();
     let mut parameters = serde_json::Map::new();
     for i in 0..6 {
         let ci = full.and_then(|f| f.ci95).map(|c| json!(c[i]));
@@ -194,7 +169,7 @@ fn print_table(
         (None, Ok(p)) => p.params,
         (None, Err(_)) => return,
     };
-    let v = values(&params);
+    let v = params.values();
     match method {
         MethodArg::Full => println!("full model: R, L, k, f, J, Ts fitted jointly to both records (exact response, breakaway included)"),
         MethodArg::Paper => println!("paper method: fit of Eq. (33), then Eqs. (34)-(51) (the method gives no confidence intervals)"),

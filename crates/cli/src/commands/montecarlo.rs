@@ -24,17 +24,6 @@ struct Run {
     stop: Option<String>,
 }
 
-fn values(p: &MotorParams) -> [f64; 6] {
-    [
-        p.r_ohm,
-        p.l_henry,
-        p.k_nm_per_a,
-        p.f_nms_per_rad,
-        p.j_kgm2,
-        p.ts_nm,
-    ]
-}
-
 /// How the simulated logger records a step test.
 #[derive(Debug, Clone, Copy)]
 pub struct Logger {
@@ -89,9 +78,9 @@ fn one_run(a: &MontecarloArgs, motor: &MotorParams, i: usize) -> Result<Run> {
     let hv = record(&logger, motor, a.high_voltage, seed)?;
     let lv = record(&logger, motor, a.low_voltage, seed.wrapping_add(1))?;
     let tests = [hv.test(), lv.test()];
-    let truth = values(motor);
+    let truth = motor.values();
     let rel = |p: &MotorParams| {
-        let v = values(p);
+        let v = p.values();
         std::array::from_fn(|k| (v[k] - truth[k]) / truth[k])
     };
     let paper = identify_paper(&tests[0], &tests[1], LmSettings::default()).ok();
@@ -172,7 +161,7 @@ pub fn run(a: &MontecarloArgs) -> Result<()> {
         }
     }
     let elapsed = started.elapsed().as_secs_f64();
-    let truth = values(&motor);
+    let truth = motor.values();
     let with_ci = runs.iter().filter(|r| r.covered.is_some()).count();
     let converged = runs.iter().filter(|r| r.converged).count();
     let paper_applied = runs.iter().filter(|r| r.paper_error.is_some()).count();

@@ -102,18 +102,7 @@ impl Simulator {
 
     /// Simulates `duration_s` \[s\] from rest, sampled at `rate_hz` \[Hz\] (`t = 0, 1/rate, …`).
     pub fn run(&self, duration_s: f64, rate_hz: f64) -> Result<Trace, ModelError> {
-        let duration_s = positive("duration", duration_s)?;
-        let rate_hz = positive("sample rate", rate_hz)?;
-        let n_f = (duration_s * rate_hz).floor() + 1.0;
-        if n_f > MAX_SAMPLES as f64 {
-            return Err(ModelError::InvalidSetting {
-                name: "duration × rate".into(),
-                value: n_f,
-                expected: "at most 10,000,000 samples: shorten the record or lower the rate",
-            });
-        }
-        let n = n_f as usize;
-        let dt = 1.0 / rate_hz;
+        let (n, dt) = sample_grid(duration_s, rate_hz)?;
         let mut trace = Trace {
             t: Vec::with_capacity(n),
             voltage: Vec::with_capacity(n),
@@ -309,6 +298,22 @@ impl Simulator {
             .map_or(0.0, |lag| (i - x[IF_IDX]) / lag.tau_f_s);
         [di, dw, dth, d_temp, d_if]
     }
+}
+
+/// Number of samples `⌊duration·rate⌋ + 1` (t = 0 to `duration_s` \[s\] included) and the
+/// sample period \[s\], refusing non-positive settings and records over [`MAX_SAMPLES`].
+pub(crate) fn sample_grid(duration_s: f64, rate_hz: f64) -> Result<(usize, f64), ModelError> {
+    let duration_s = positive("duration", duration_s)?;
+    let rate_hz = positive("sample rate", rate_hz)?;
+    let n_f = (duration_s * rate_hz).floor() + 1.0;
+    if n_f > MAX_SAMPLES as f64 {
+        return Err(ModelError::InvalidSetting {
+            name: "duration × rate".into(),
+            value: n_f,
+            expected: "at most 10,000,000 samples: shorten the record or lower the rate",
+        });
+    }
+    Ok((n_f as usize, 1.0 / rate_hz))
 }
 
 fn axpy(x: &State, a: f64, y: &State) -> State {
