@@ -28,8 +28,10 @@ mod checks;
 mod error;
 mod full_model;
 mod lm;
+mod mechanical;
 mod model33;
 mod paper_method;
+mod signal;
 mod start;
 mod stats;
 mod steady_fit;
@@ -43,12 +45,16 @@ pub use full_model::{
 pub use lm::{
     solve, LeastSquares, LevenbergMarquardt, LmReport, LmSettings, NormalEquations, Termination,
 };
+pub use mechanical::{
+    identify_inverse_model, InverseModelSettings, MechanicalFit, MECHANICAL_NAMES,
+};
 pub use model33::{fit_33, Fit33, Params33, Record33};
 pub use paper_method::{
     from_high_voltage, identify_paper, speed_check_c8, suggested_low_voltage_45,
     tau_m_as_printed_37, with_low_voltage, HighVoltageResult, PaperIdentification, SpeedCheck,
     TwoTestFriction,
 };
+pub use signal::{decimate, Butterworth};
 pub use start::steady_state_start;
 pub use stats::{
     newey_west_lags, sandwich_uncertainty, student_t_quantile, uncertainty, Uncertainty,
