@@ -71,6 +71,22 @@ pub enum MethodArg {
     Full,
 }
 
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum DriveArg {
+    /// The armature voltage is the input (the paper's step tests).
+    Voltage,
+    /// The drive controls the current: the torque is k times the current.
+    Current,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum AxisArg {
+    /// Angles in rad.
+    Rotary,
+    /// Positions in m.
+    Linear,
+}
+
 #[derive(Debug, Args)]
 pub struct IdentifyArgs {
     /// High-voltage step record (CSV: t, voltage, current and speed or position).
@@ -88,9 +104,29 @@ pub struct IdentifyArgs {
     /// Known armature resistance R [ohm] for --steady (Sec. 2.2 assumes it known).
     #[arg(long, value_name = "OHM", requires = "steady")]
     pub resistance: Option<f64>,
-    /// Known torque constant k [N·m/A] for --steady.
-    #[arg(long, value_name = "NM_PER_A", requires = "steady")]
+    /// Torque constant k [N·m/A] (N/A for a linear axis): known k for --steady; for --input
+    /// current, the torque (force) per unit of the current column (EMPS: 35.15 N per volt of vir).
+    #[arg(long, value_name = "K")]
     pub torque_constant: Option<f64>,
+    /// What drives the axis: voltage steps (all six parameters), or a drive with a current loop
+    /// (J, f, Ts and a load offset from current and position, any motion, open or closed loop).
+    #[arg(long, value_enum, default_value = "voltage")]
+    pub input: DriveArg,
+    /// The record of a current-driven axis (with --input current).
+    #[arg(long, value_name = "FILE.csv")]
+    pub record: Option<PathBuf>,
+    /// Column names of a file from another tool: t=HEADER,current=HEADER,position=HEADER,...
+    #[arg(long, value_name = "NAME=HEADER,...")]
+    pub columns: Option<String>,
+    /// Rotary axis (rad: kg·m², N·m·s/rad, N·m) or linear axis (m: kg, N·s/m, N).
+    #[arg(long, value_enum, default_value = "rotary")]
+    pub axis: AxisArg,
+    /// Cut-off of the zero-phase position filter for --input current [Hz].
+    #[arg(long, value_name = "HZ", default_value_t = 100.0)]
+    pub cutoff: f64,
+    /// Decimation factor of the parallel filtering for --input current.
+    #[arg(long, value_name = "N", default_value_t = 10)]
+    pub decimation: usize,
     /// Print one JSON object instead of tables.
     #[arg(long)]
     pub json: bool,

@@ -10,8 +10,56 @@ use motor_model::Record;
 
 use crate::BadInput;
 
+/// Which header names hold the record's columns (`t`, `voltage`, `current`, `speed`,
+/// `position`), for files written by other tools: `--columns t=time_s,current=vir,...`.
+#[derive(Debug, Clone, Default)]
+pub struct ColumnMap {
+    pairs: Vec<(String, String)>,
+}
+
+/// The record's own column names.
+const COLUMNS: [&str; 5] = ["t", "voltage", "current", "speed", "position"];
+
+impl ColumnMap {
+    /// Parses `name=header,...`.
+    pub fn parse(text: &str) -> Result<Self> {
+        let mut pairs = Vec::new();
+        for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+            let (name, header) = item.split_once('=').ok_or_else(|| {
+                BadInput(format!(
+                    "--columns: `{item}` is not of the form name=header, e.g. t=time_s"
+                ))
+            })?;
+            let name = name.trim();
+            if !COLUMNS.contains(&name) {
+                return Err(BadInput(format!(
+                    "--columns: unknown column `{name}`; the names are {}",
+                    COLUMNS.join(", ")
+                ))
+                .into());
+            }
+            pairs.push((name.to_string(), header.trim().to_string()));
+        }
+        Ok(ColumnMap { pairs })
+    }
+
+    /// The header name of column `name`.
+    fn header<'a>(&'a self, name: &'a str) -> &'a str {
+        self.pairs
+            .iter()
+            .find(|(n, _)| n == name)
+            .map_or(name, |(_, h)| h.as_str())
+    }
+}
+
 /// Reads a record file. Every problem is a [`BadInput`] naming the file, the line and the value.
 pub fn read_file(path: &Path) -> Result<Record> {
+    read_mapped(path, &ColumnMap::default(), true)
+}
+
+/// Reads a record file whose columns `map` names; `voltage` may be absent when
+/// `need_voltage` is false (a current-driven axis). With a map, unmapped columns are ignored.
+pub fn read_mapped(path: &Path, map: &ColumnMap, need_voltage: bool) -> Result<Record> {
     let shown = path.display();
     let bytes = std::fs::read(path).map_err(|e| BadInput(format!("{shown}: cannot read ({e})")))?;
     let text = String::from_utf8(bytes).map_err(|e| {
@@ -20,11 +68,16 @@ pub fn read_file(path: &Path) -> Result<Record> {
             e.utf8_error().valid_up_to()
         ))
     })?;
-    parse(&text).map_err(|(line, msg)| BadInput(format!("{shown}:{line}: {msg}")).into())
+    parse(&text, map, need_voltage)
+        .map_err(|(line, msg)| BadInput(format!("{shown}:{line}: {msg}")).into())
 }
 
 /// Parses record text; errors carry the 1-based line number.
-fn parse(text: &str) -> std::result::Result<Record, (usize, String)> {
+fn parse(
+    text: &str,
+    map: &ColumnMap,
+    need_voltage: bool,
+) -> std::result::Result<Record, (usize, String)> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut lines = text
         .lines()
@@ -38,7 +91,7 @@ fn parse(text: &str) -> std::result::Result<Record, (usize, String)> {
             "no header row: expected a line such as t,voltage,current,speed,position".to_string(),
         ))?;
     let names: Vec<&str> = header.split(',').map(str::trim).collect();
-    let find = |name: &str| names.iter().position(|n| *n == name);
+    let find = |name: &str| names.iter().position(|n| *n == map.header(name));
     for (i, name) in names.iter().enumerate() {
         if names[..i].contains(name) {
             return Err((
@@ -46,14 +99,26 @@ fn parse(text: &str) -> std::result::Result<Record, (usize, String)> {
                 format!("column `{name}` appears twice in the header"),
             ));
         }
-        if !["t", "voltage", "current", "speed", "position"].contains(name) {
-            return Err((header_line, format!("unknown column `{name}`: expected t, voltage, current and optionally speed, position")));
+        if map.pairs.is_empty() && !COLUMNS.contains(name) {
+            return Err((header_line, format!("unknown column `{name}`: expected t, voltage, current and optionally speed, position (or map a file's own names with --columns)")));
         }
     }
     let required = |name: &str| {
-        find(name).ok_or((header_line, format!("no `{name}` column in the header `{header}`: a record needs t, voltage and current")))
+        find(name).ok_or((
+            header_line,
+            format!(
+                "no `{}` column in the header `{header}`: a record needs t, current{} (map other names with --columns)",
+                map.header(name),
+                if need_voltage { ", voltage" } else { "" }
+            ),
+        ))
     };
-    let (it, iv, ic) = (required("t")?, required("voltage")?, required("current")?);
+    let (it, ic) = (required("t")?, required("current")?);
+    let iv = if need_voltage {
+        Some(required("voltage")?)
+    } else {
+        find("voltage")
+    };
     let (is, ip) = (find("speed"), find("position"));
     let mut cols = Record {
         speed: is.map(|_| Vec::new()),
@@ -105,7 +170,9 @@ fn parse(text: &str) -> std::result::Result<Record, (usize, String)> {
         }
         last_t = values[it];
         cols.t.push(values[it]);
-        cols.voltage.push(values[iv]);
+        if let Some(i) = iv {
+            cols.voltage.push(values[i]);
+        }
         cols.current.push(values[ic]);
         if let (Some(i), Some(c)) = (is, cols.speed.as_mut()) {
             c.push(values[i]);

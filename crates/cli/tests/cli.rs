@@ -528,3 +528,143 @@ fn underdamped_motor_is_identified_without_the_paper_method() {
             == Some(2)
     );
 }
+
+/// Issue 4, acceptance 1 (first half): the EMPS benchmark's real record, force = 35.15 × vir,
+/// identified as a current-driven linear axis: M, Fv, Fc and the offset within 5 % of the
+/// published IDIM-LS reference (M 95.1089 kg, Fv 203.5034 N·s/m, Fc 20.3935 N, offset
+/// −3.1648 N), and each reference value inside the 95 % interval. The data lives in
+/// ../shared/real-data beside the repository (as in CI); elsewhere the test says so and stops.
+#[test]
+fn emps_real_data_matches_the_published_reference() {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/real-data/emps/DATA_EMPS.csv"
+    );
+    if !std::path::Path::new(path).exists() {
+        eprintln!("skipped: {path} is not on this machine");
+        return;
+    }
+    let out = motorid(&[
+        "identify",
+        "--input",
+        "current",
+        "--record",
+        path,
+        "--columns",
+        "t=time_s,current=vir_controller_output_V,position=qm_motor_position_m",
+        "--torque-constant",
+        "35.15",
+        "--axis",
+        "linear",
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
+    for (name, reference, unit) in [
+        ("J", 95.1089, "kg"),
+        ("f", 203.5034, "N·s/m"),
+        ("Ts", 20.3935, "N"),
+        ("offset", -3.1648, "N"),
+    ] {
+        let p = &v["parameters"][name];
+        let value = p["value"].as_f64().unwrap();
+        assert!(
+            (value / reference - 1.0).abs() < 0.05,
+            "{name} = {value}, reference {reference}"
+        );
+        let ci = p["ci95"].as_array().unwrap();
+        let (lo, hi) = (ci[0].as_f64().unwrap(), ci[1].as_f64().unwrap());
+        assert!(
+            lo <= reference && reference <= hi,
+            "{name}: [{lo}, {hi}] vs {reference}"
+        );
+        assert_eq!(p["unit"], unit);
+    }
+}
+
+#[test]
+fn current_driven_input_errors_name_what_is_missing() {
+    let dir = scratch("current-input");
+    let rec = dir.join("axis.csv");
+    std::fs::write(&rec, "time_s,vir,qm\n0,1,0\n0.001,1,0.1\n").unwrap();
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            vec!["identify", "--input", "current", "--torque-constant", "2"],
+            "needs --record",
+        ),
+        (
+            vec![
+                "identify",
+                "--input",
+                "current",
+                "--record",
+                rec.to_str().unwrap(),
+            ],
+            "needs --torque-constant",
+        ),
+        (
+            vec![
+                "identify",
+                "--input",
+                "current",
+                "--record",
+                rec.to_str().unwrap(),
+                "--torque-constant",
+                "2",
+            ],
+            "unknown column `time_s`",
+        ),
+        (
+            vec![
+                "identify",
+                "--input",
+                "current",
+                "--record",
+                rec.to_str().unwrap(),
+                "--torque-constant",
+                "2",
+                "--columns",
+                "t=time_s,current=vir",
+            ],
+            "no position column",
+        ),
+        (
+            vec![
+                "identify",
+                "--input",
+                "current",
+                "--record",
+                rec.to_str().unwrap(),
+                "--torque-constant",
+                "2",
+                "--columns",
+                "t=time_s,current=vir,angle=qm",
+            ],
+            "unknown column `angle`",
+        ),
+        (
+            vec![
+                "identify",
+                "--input",
+                "current",
+                "--record",
+                rec.to_str().unwrap(),
+                "--torque-constant",
+                "2",
+                "--columns",
+                "t=time_s,current=vir,position=qm",
+            ],
+            "at least",
+        ),
+    ];
+    for (args, needle) in cases {
+        let out = motorid(&args);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(
+            err.contains(needle),
+            "{args:?}: `{err}` should mention `{needle}`"
+        );
+        assert!(!err.contains("panicked"));
+    }
+}

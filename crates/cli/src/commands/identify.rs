@@ -4,14 +4,15 @@ use std::path::Path;
 
 use anyhow::Result;
 use fit::{
-    fit_apparent_resistance, identify_full, identify_paper, locate_step, steady_state_start,
-    FullFit, LmSettings, PaperIdentification, StepTest, PARAM_NAMES, PARAM_UNITS,
+    fit_apparent_resistance, identify_full, identify_inverse_model, identify_paper, locate_step,
+    steady_state_start, FullFit, InverseModelSettings, LmSettings, PaperIdentification, StepTest,
+    MECHANICAL_NAMES, PARAM_NAMES, PARAM_UNITS,
 };
 use motor_model::{central_difference, Derived, Record};
 use serde_json::{json, Value};
 
-use crate::args::{IdentifyArgs, MethodArg};
-use crate::record_csv::read_file;
+use crate::args::{AxisArg, DriveArg, IdentifyArgs, MethodArg};
+use crate::record_csv::{read_file, read_mapped, ColumnMap};
 use crate::{BadInput, NotConverged};
 
 /// A 95 % interval wider than this fraction of the value marks a poorly determined parameter.
@@ -296,7 +297,103 @@ fn run_steady(a: &IdentifyArgs) -> Result<()> {
     Ok(())
 }
 
+/// `--input current`: J, f, Ts and the offset of a current-driven axis by inverse-model least
+/// squares (the EMPS benchmark's IDIM-LS).
+fn run_current(a: &IdentifyArgs) -> Result<()> {
+    let path = a.record.as_ref().ok_or_else(|| {
+        BadInput(
+            "--input current needs --record FILE.csv (current and position of the axis)".into(),
+        )
+    })?;
+    let k = a.torque_constant.ok_or_else(|| {
+        BadInput("--input current needs --torque-constant K: the torque (force) per unit of the current column".into())
+    })?;
+    if !(k.is_finite() && k > 0.0) {
+        return Err(BadInput(format!("--torque-constant {k}: expected a positive number")).into());
+    }
+    let map = match &a.columns {
+        Some(text) => ColumnMap::parse(text)?,
+        None => ColumnMap::default(),
+    };
+    let rec = read_mapped(path, &map, false)?;
+    let shown = path.display();
+    let position = rec.position.as_ref().ok_or_else(|| {
+        BadInput(format!("{shown}: no position column: --input current fits J, f, Ts from the position (map it with --columns position=HEADER)"))
+    })?;
+    let n = rec.t.len();
+    let dt = if n > 1 {
+        (rec.t[n - 1] - rec.t[0]) / (n - 1) as f64
+    } else {
+        f64::NAN
+    };
+    let torque: Vec<f64> = rec.current.iter().map(|i| k * i).collect();
+    let settings = InverseModelSettings {
+        position_cutoff_hz: a.cutoff,
+        position_filter_order: 4,
+        decimation: a.decimation,
+    };
+    let fit = identify_inverse_model(dt, &torque, position, settings)
+        .map_err(|e| BadInput(format!("{shown}: {e}")))?;
+    let units = match a.axis {
+        AxisArg::Rotary => ["kg·m²", "N·m·s/rad", "N·m", "N·m"],
+        AxisArg::Linear => ["kg", "N·s/m", "N", "N"],
+    };
+    if a.json {
+        let mut parameters = serde_json::Map::new();
+        for i in 0..4 {
+            parameters.insert(
+                MECHANICAL_NAMES[i].into(),
+                json!({"value": fit.values[i], "ci95": fit.ci95.map(|c| c[i]), "unit": units[i]}),
+            );
+        }
+        let report = json!({
+            "method": "inverse_model",
+            "input": "current",
+            "parameters": parameters,
+            "quality": {
+                "samples_after_decimation": fit.samples,
+                "torque_residual_rms": fit.residual_rms,
+                "nrmse_fit_percent": fit.nrmse_fit_percent,
+                "correlation": fit.correlation.as_ref().map(|c| json!({
+                    "order": MECHANICAL_NAMES,
+                    "matrix": (0..4).map(|i| (0..4).map(|j| c[(i, j)]).collect::<Vec<f64>>()).collect::<Vec<_>>(),
+                })),
+            },
+            "settings": {"cutoff_hz": a.cutoff, "decimation": a.decimation, "torque_constant": k},
+        });
+        println!("{}", serde_json::to_string_pretty(&report)?);
+        return Ok(());
+    }
+    println!(
+        "inverse model (current-driven axis): torque = J q'' + f q' + Ts sign(q') + offset, from {shown}"
+    );
+    println!("      {:>12}   {:<27} unit", "value", "95% CI");
+    for i in 0..4 {
+        let ci = fit.ci95.map_or("-".to_string(), |c| {
+            format!("[{}, {}]", sig(c[i][0]), sig(c[i][1]))
+        });
+        println!(
+            "  {:<6} {:>12}   {:<27} {}",
+            MECHANICAL_NAMES[i],
+            sig(fit.values[i]),
+            ci,
+            units[i]
+        );
+    }
+    println!(
+        "fit: {} samples after decimation by {}, torque residual RMS {}, fit {:.2} %",
+        fit.samples,
+        a.decimation,
+        sig(fit.residual_rms),
+        fit.nrmse_fit_percent
+    );
+    Ok(())
+}
+
 pub fn run(a: &IdentifyArgs) -> Result<()> {
+    if a.input == DriveArg::Current {
+        return run_current(a);
+    }
     if !a.steady.is_empty() {
         return run_steady(a);
     }
