@@ -60,24 +60,37 @@ pub fn read_file(path: &Path) -> Result<Record> {
 /// Reads a record file whose columns `map` names; `voltage` may be absent when
 /// `need_voltage` is false (a current-driven axis). With a map, unmapped columns are ignored.
 pub fn read_mapped(path: &Path, map: &ColumnMap, need_voltage: bool) -> Result<Record> {
-    let shown = path.display();
-    let bytes = std::fs::read(path).map_err(|e| BadInput(format!("{shown}: cannot read ({e})")))?;
-    let text = String::from_utf8(bytes).map_err(|e| {
-        BadInput(format!(
-            "{shown}: not UTF-8 text (invalid byte at offset {}): is this a CSV record?",
-            e.utf8_error().valid_up_to()
-        ))
-    })?;
-    parse(&text, map, need_voltage)
-        .map_err(|(line, msg)| BadInput(format!("{shown}:{line}: {msg}")).into())
+    let table = read_table(path)?;
+    to_record(&table, map, need_voltage)
+        .map_err(|(line, msg)| BadInput(format!("{}:{line}: {msg}", path.display())).into())
 }
 
-/// Parses record text; errors carry the 1-based line number.
-fn parse(
-    text: &str,
-    map: &ColumnMap,
-    need_voltage: bool,
-) -> std::result::Result<Record, (usize, String)> {
+/// A CSV file's numeric columns by header name, with the line number of every row.
+#[derive(Debug, Clone, Default)]
+pub struct Table {
+    /// Header names, in file order.
+    pub names: Vec<String>,
+    /// One vector per header name.
+    pub columns: Vec<Vec<f64>>,
+    /// 1-based line number of each row.
+    pub lines: Vec<usize>,
+    /// Line number of the header.
+    pub header_line: usize,
+}
+
+impl Table {
+    /// The column named `name`, if any.
+    pub fn column(&self, name: &str) -> Option<&[f64]> {
+        self.names
+            .iter()
+            .position(|n| n == name)
+            .map(|i| self.columns[i].as_slice())
+    }
+}
+
+/// Parses CSV text: `#` lines and blank lines skipped, one header row, numeric fields;
+/// errors carry the 1-based line number.
+fn parse_table(text: &str) -> std::result::Result<Table, (usize, String)> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut lines = text
         .lines()
@@ -90,8 +103,7 @@ fn parse(
             1,
             "no header row: expected a line such as t,voltage,current,speed,position".to_string(),
         ))?;
-    let names: Vec<&str> = header.split(',').map(str::trim).collect();
-    let find = |name: &str| names.iter().position(|n| *n == map.header(name));
+    let names: Vec<String> = header.split(',').map(|n| n.trim().to_string()).collect();
     for (i, name) in names.iter().enumerate() {
         if names[..i].contains(name) {
             return Err((
@@ -99,48 +111,30 @@ fn parse(
                 format!("column `{name}` appears twice in the header"),
             ));
         }
-        if map.pairs.is_empty() && !COLUMNS.contains(name) {
-            return Err((header_line, format!("unknown column `{name}`: expected t, voltage, current and optionally speed, position (or map a file's own names with --columns)")));
-        }
     }
-    let required = |name: &str| {
-        find(name).ok_or((
-            header_line,
-            format!(
-                "no `{}` column in the header `{header}`: a record needs t, current{} (map other names with --columns)",
-                map.header(name),
-                if need_voltage { ", voltage" } else { "" }
-            ),
-        ))
+    let mut table = Table {
+        columns: vec![Vec::new(); names.len()],
+        names,
+        lines: Vec::new(),
+        header_line,
     };
-    let (it, ic) = (required("t")?, required("current")?);
-    let iv = if need_voltage {
-        Some(required("voltage")?)
-    } else {
-        find("voltage")
-    };
-    let (is, ip) = (find("speed"), find("position"));
-    let mut cols = Record {
-        speed: is.map(|_| Vec::new()),
-        position: ip.map(|_| Vec::new()),
-        ..Record::default()
-    };
-    let mut values = Vec::with_capacity(names.len());
-    let mut last_t = f64::NEG_INFINITY;
     for (line_no, line) in lines {
         if line.trim().is_empty() || line.starts_with('#') {
             continue;
         }
-        values.clear();
-        for (k, field) in line.split(',').enumerate() {
-            let name = names.get(k).ok_or((
+        let fields: Vec<&str> = line.split(',').collect();
+        if fields.len() != table.names.len() {
+            return Err((
                 line_no,
                 format!(
-                    "{} fields where the header has {}",
-                    line.split(',').count(),
-                    names.len()
+                    "{} fields where the header has {} (a line cut short?)",
+                    fields.len(),
+                    table.names.len()
                 ),
-            ))?;
+            ));
+        }
+        for (k, field) in fields.iter().enumerate() {
+            let name = &table.names[k];
             let v: f64 = field.trim().parse().map_err(|_| {
                 (
                     line_no,
@@ -153,38 +147,72 @@ fn parse(
                     format!("column `{name}` is {v}: every value must be finite"),
                 ));
             }
-            values.push(v);
+            table.columns[k].push(v);
         }
-        if values.len() != names.len() {
-            return Err((
-                line_no,
-                format!(
-                    "{} fields where the header has {} (a line cut short?)",
-                    values.len(),
-                    names.len()
-                ),
-            ));
-        }
-        if values[it] <= last_t {
-            return Err((line_no, format!("t = {} s does not come after the previous t = {last_t} s: time must increase strictly", values[it])));
-        }
-        last_t = values[it];
-        cols.t.push(values[it]);
-        if let Some(i) = iv {
-            cols.voltage.push(values[i]);
-        }
-        cols.current.push(values[ic]);
-        if let (Some(i), Some(c)) = (is, cols.speed.as_mut()) {
-            c.push(values[i]);
-        }
-        if let (Some(i), Some(c)) = (ip, cols.position.as_mut()) {
-            c.push(values[i]);
-        }
+        table.lines.push(line_no);
     }
-    if cols.t.is_empty() {
+    if table.lines.is_empty() {
         return Err((header_line, "no data rows after the header".into()));
     }
-    Ok(cols)
+    Ok(table)
+}
+
+/// Reads a CSV file as a [`Table`]; every problem is a [`BadInput`] naming file and line.
+pub fn read_table(path: &Path) -> Result<Table> {
+    let shown = path.display();
+    let bytes = std::fs::read(path).map_err(|e| BadInput(format!("{shown}: cannot read ({e})")))?;
+    let text = String::from_utf8(bytes).map_err(|e| {
+        BadInput(format!(
+            "{shown}: not UTF-8 text (invalid byte at offset {}): is this a CSV file?",
+            e.utf8_error().valid_up_to()
+        ))
+    })?;
+    parse_table(&text).map_err(|(line, msg)| BadInput(format!("{shown}:{line}: {msg}")).into())
+}
+
+/// Maps a table's columns to a record (SPEC section 4): `t` strictly increasing, `current`
+/// required, `voltage` required when `need_voltage`.
+fn to_record(
+    table: &Table,
+    map: &ColumnMap,
+    need_voltage: bool,
+) -> std::result::Result<Record, (usize, String)> {
+    let header_line = table.header_line;
+    if map.pairs.is_empty() {
+        if let Some(name) = table.names.iter().find(|n| !COLUMNS.contains(&n.as_str())) {
+            return Err((header_line, format!("unknown column `{name}`: expected t, voltage, current and optionally speed, position (or map a file's own names with --columns)")));
+        }
+    }
+    let get = |name: &str| table.column(map.header(name)).map(<[f64]>::to_vec);
+    let required = |name: &str| {
+        get(name).ok_or((
+            header_line,
+            format!(
+                "no `{}` column in the header `{}`: a record needs t, current{} (map other names with --columns)",
+                map.header(name),
+                table.names.join(","),
+                if need_voltage { ", voltage" } else { "" }
+            ),
+        ))
+    };
+    let t = required("t")?;
+    for (i, w) in t.windows(2).enumerate() {
+        if w[1] <= w[0] {
+            return Err((table.lines[i + 1], format!("t = {} s does not come after the previous t = {} s: time must increase strictly", w[1], w[0])));
+        }
+    }
+    Ok(Record {
+        current: required("current")?,
+        voltage: if need_voltage {
+            required("voltage")?
+        } else {
+            get("voltage").unwrap_or_default()
+        },
+        speed: get("speed"),
+        position: get("position"),
+        t,
+        clipped: [0; 3],
+    })
 }
 
 /// Writes `record` as CSV with `#` metadata lines to `out`.

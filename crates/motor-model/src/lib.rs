@@ -28,6 +28,7 @@
 //! ```
 #![warn(missing_docs)]
 
+mod axis;
 mod derived;
 mod error;
 mod measure;
@@ -38,6 +39,7 @@ mod sim;
 mod steady;
 mod step;
 
+pub use axis::{simulate_pd_axis, AxisParams, PdController};
 pub use derived::{Derived, Regime};
 pub use error::ModelError;
 pub use measure::{
