@@ -25,6 +25,19 @@ pub enum Command {
     Demo(DemoArgs),
     /// Monte Carlo check of the identification: errors and CI coverage over many noisy records.
     Montecarlo(MontecarloArgs),
+    /// The EMPS benchmark (real data): identify the axis, then simulate it in closed loop on the
+    /// record with unmodelled force pulses and report where the model disagrees.
+    Emps(EmpsArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct EmpsArgs {
+    /// Folder holding DATA_EMPS.csv and DATA_EMPS_PULSES.csv.
+    #[arg(long, value_name = "DIR", default_value = "../shared/real-data/emps")]
+    pub dir: PathBuf,
+    /// Print one JSON object instead of the report.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, Args)]

@@ -58,6 +58,7 @@ fn main() -> ExitCode {
         Command::Identify(a) => commands::identify::run(&a),
         Command::Demo(a) => commands::demo::run(&a),
         Command::Montecarlo(a) => commands::montecarlo::run(&a),
+        Command::Emps(a) => commands::emps::run(&a),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

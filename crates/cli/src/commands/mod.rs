@@ -1,4 +1,5 @@
 pub mod demo;
+pub mod emps;
 pub mod identify;
 pub mod model;
 pub mod montecarlo;
