@@ -35,6 +35,10 @@ pub struct EmpsArgs {
     /// Folder holding DATA_EMPS.csv and DATA_EMPS_PULSES.csv.
     #[arg(long, value_name = "DIR", default_value = "../shared/real-data/emps")]
     pub dir: PathBuf,
+    /// Write the figure emps_pulses.svg (position error with and without the pulses in the
+    /// model, above the pulse force) into this folder.
+    #[arg(long, value_name = "DIR")]
+    pub plot: Option<PathBuf>,
     /// Print one JSON object instead of the report.
     #[arg(long)]
     pub json: bool,

@@ -10,6 +10,7 @@
 mod args;
 mod commands;
 mod paper_values;
+mod plot;
 mod record_csv;
 mod settings;
 

@@ -2,7 +2,7 @@
 //! and line, and writing them atomically.
 
 use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
@@ -250,9 +250,16 @@ pub fn write_to(
     Ok(())
 }
 
-/// Writes `record` to `path` atomically: a temporary file beside it, flushed and synced, then
-/// renamed over `path`. A failure never leaves a half-written record under `path`.
+/// Writes `record` to `path` atomically (see [`write_atomically`]).
 pub fn write_file(path: &Path, record: &Record, metadata: &[(String, String)]) -> Result<()> {
+    let mut bytes = Vec::new();
+    write_to(&mut bytes, record, metadata)?;
+    write_atomically(path, &bytes)
+}
+
+/// Writes `bytes` to `path` atomically: a temporary file beside it, flushed and synced, then
+/// renamed over `path`. A failure never leaves a half-written file under `path`.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     let dir = path
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
@@ -265,10 +272,8 @@ pub fn write_file(path: &Path, record: &Record, metadata: &[(String, String)]) -
     tmp_name.push(format!(".tmp-{}", std::process::id()));
     let tmp: PathBuf = dir.join(tmp_name);
     let result = (|| -> Result<()> {
-        let file = File::create(&tmp)?;
-        let mut w = BufWriter::new(file);
-        write_to(&mut w, record, metadata)?;
-        let file = w.into_inner().map_err(|e| e.into_error())?;
+        let mut file = File::create(&tmp)?;
+        file.write_all(bytes)?;
         file.sync_all()?;
         std::fs::rename(&tmp, path)?;
         Ok(())

@@ -687,8 +687,21 @@ fn emps_pulses_show_where_the_model_disagrees() {
         eprintln!("skipped: {dir} is not on this machine");
         return;
     }
-    let out = motorid(&["emps", "--dir", dir, "--json"]);
+    let plots = scratch("emps-plot");
+    let out = motorid(&[
+        "emps",
+        "--dir",
+        dir,
+        "--json",
+        "--plot",
+        plots.to_str().unwrap(),
+    ]);
     assert!(out.status.success(), "{}", stderr(&out));
+    let svg = std::fs::read_to_string(plots.join("emps_pulses.svg")).unwrap();
+    assert!(
+        svg.starts_with("<svg") && svg.contains("pulses unmodelled"),
+        "not the figure"
+    );
     let v: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
     let val = &v["validation_record"];
     let without = val["without_pulses"]["position_rms_pulse_on_m"]

@@ -14,7 +14,10 @@ use fit::{identify_inverse_model, InverseModelSettings, MECHANICAL_NAMES};
 use motor_model::{simulate_pd_axis, AxisParams, PdController};
 use serde_json::json;
 
+use plotters::style::{BLACK, BLUE, RED};
+
 use crate::args::EmpsArgs;
+use crate::plot::{self, Panel, Series};
 use crate::record_csv::{read_table, Table};
 use crate::BadInput;
 
@@ -144,6 +147,49 @@ pub fn run(a: &EmpsArgs) -> Result<()> {
     let (near_with, far_with) = split(&q_val_p);
     let near_fraction = near.iter().filter(|n| **n).count() as f64 / near.len() as f64;
 
+    if let Some(dir) = &a.plot {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
+        let t_val = column(&val, "time_s", &val_name)?;
+        let to_mm =
+            |q: &[f64]| -> Vec<f64> { qm.iter().zip(q).map(|(m, s)| 1e3 * (m - s)).collect() };
+        let (err_without, err_with) = (to_mm(&q_val), to_mm(&q_val_p));
+        let pulse_force: Vec<f64> = pulses.iter().map(|p| DRIVE_GAIN_N_PER_V * p).collect();
+        let path = dir.join("emps_pulses.svg");
+        plot::time_series_svg(
+            &path,
+            "EMPS validation record: measured minus simulated position",
+            t_val,
+            &[
+                Panel {
+                    y_label: "position error [mm]",
+                    series: vec![
+                        Series {
+                            label: "pulses unmodelled",
+                            values: &err_without,
+                            color: RED,
+                        },
+                        Series {
+                            label: "pulses in the model",
+                            values: &err_with,
+                            color: BLUE,
+                        },
+                    ],
+                },
+                Panel {
+                    y_label: "pulse force [N]",
+                    series: vec![Series {
+                        label: "pulses (5 V of command x 35.15 N/V)",
+                        values: &pulse_force,
+                        color: BLACK,
+                    }],
+                },
+            ],
+        )?;
+        if !a.json {
+            println!("wrote {}", path.display());
+        }
+    }
     if a.json {
         let report = json!({
             "identified": MECHANICAL_NAMES.iter().zip(fit.values).zip(REFERENCE).map(|((n, v), r)| json!({
