@@ -18,6 +18,23 @@ fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// Bad input: exit code 2, a one-line error that mentions `needle`, never a panic.
+fn assert_bad_input(args: &[&str], needle: &str) {
+    let out = motorid(args);
+    let err = stderr(&out);
+    assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
+    assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+    assert!(
+        err.contains(needle),
+        "{args:?}: `{err}` should mention `{needle}`"
+    );
+    assert_eq!(
+        err.trim_end().lines().count(),
+        1,
+        "{args:?}: not one line: {err}"
+    );
+}
+
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("motorid-cli-{}-{name}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -261,19 +278,7 @@ fn bad_input_gives_one_line_errors_and_exit_code_2() {
         (vec!["simulate", "--voltage", "nan"], "voltage"),
     ];
     for (args, needle) in cases {
-        let out = motorid(&args);
-        let err = stderr(&out);
-        assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
-        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
-        assert!(
-            err.contains(needle),
-            "{args:?}: `{err}` should mention `{needle}`"
-        );
-        assert_eq!(
-            err.trim_end().lines().count(),
-            1,
-            "{args:?}: not one line: {err}"
-        );
+        assert_bad_input(&args, needle);
     }
 }
 
@@ -658,14 +663,7 @@ fn current_driven_input_errors_name_what_is_missing() {
         ),
     ];
     for (args, needle) in cases {
-        let out = motorid(&args);
-        let err = stderr(&out);
-        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
-        assert!(
-            err.contains(needle),
-            "{args:?}: `{err}` should mention `{needle}`"
-        );
-        assert!(!err.contains("panicked"));
+        assert_bad_input(&args, needle);
     }
 }
 
