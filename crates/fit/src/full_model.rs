@@ -13,7 +13,7 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::error::FitError;
 use crate::lm::{solve, LeastSquares, LmSettings, NormalEquations, Termination};
-use crate::stats::{newey_west_lags, sandwich_uncertainty};
+use crate::stats::{sandwich_uncertainty, NeweyWest};
 
 /// Names of the six parameters, in the order of every array here.
 pub const PARAM_NAMES: [&str; 6] = ["R", "L", "k", "f", "J", "Ts"];
@@ -226,41 +226,21 @@ impl FullProblem {
     /// weights `wₗ = 1 − l/(L+1)`; channels are taken as independent of each other.
     fn score_covariance(&self, theta: &[f64]) -> Option<DMatrix<f64>> {
         let params = params_of::<Dual<6>>(theta, Dual::variable)?;
-        let mut s = [[0.0; 6]; 6];
-        // One ring of past scores per (test, channel).
-        let mut rings: Vec<Vec<(usize, Vec<[f64; 6]>)>> = self
+        // One accumulator per (test, channel): residuals stream interleaved across channels.
+        let mut series: Vec<Vec<NeweyWest<6>>> = self
             .tests
             .iter()
-            .map(|w| {
-                let lags = newey_west_lags(w.n).max(1);
-                w.channels
-                    .iter()
-                    .map(|_| (lags, vec![[0.0; 6]; lags]))
-                    .collect()
-            })
+            .map(|w| w.channels.iter().map(|_| NeweyWest::new(w.n)).collect())
             .collect();
-        self.for_each(params, |k, c, i, m, y, sigma| {
+        self.for_each(params, |k, c, _, m, y, sigma| {
             let r = (m.v - y) / sigma;
-            let g = m.d.map(|d| d / sigma * r);
-            let (lags, ring) = &mut rings[k][c];
-            for a in 0..6 {
-                for b in 0..6 {
-                    s[a][b] += g[a] * g[b];
-                }
-            }
-            for l in 1..=(*lags).min(i) {
-                let weight = 1.0 - l as f64 / (*lags as f64 + 1.0);
-                let past = ring[(i - l) % *lags];
-                for a in 0..6 {
-                    for b in 0..6 {
-                        s[a][b] += weight * (g[a] * past[b] + past[a] * g[b]);
-                    }
-                }
-            }
-            ring[i % *lags] = g;
+            series[k][c].push(m.d.map(|d| d / sigma * r));
         });
-        let m = DMatrix::from_fn(6, 6, |a, b| s[a][b]);
-        m.iter().all(|v| v.is_finite()).then_some(m)
+        let mut total = DMatrix::zeros(6, 6);
+        for nw in series.iter().flatten() {
+            total += nw.finish()?;
+        }
+        Some(total)
     }
 }
 
@@ -373,8 +353,28 @@ pub fn identify_full(
         tests: weighted,
         n_residuals,
     };
+    fit_weighted(&mut problem, start, settings)
+}
+
+/// A least-squares problem in `θ = ln [R, L, k, f, J, Ts]` whose residuals are channels of
+/// records, each divided by its channel's noise level.
+pub(crate) trait WeightedProblem: LeastSquares {
+    /// The noise level of every channel, in a fixed order.
+    fn sigmas_mut(&mut self) -> Vec<&mut f64>;
+    /// Fit quality of every channel at `values`, in the order of [`Self::sigmas_mut`].
+    fn channel_quality(&self, values: [f64; 6]) -> Vec<ChannelQuality>;
+    /// Newey–West covariance of the score `Jᵀr` at `theta` (channels independent).
+    fn score_covariance(&self, theta: &[f64]) -> Option<DMatrix<f64>>;
+}
+
+/// Fits `problem` from `start` in two stages and reports the parameters with their intervals.
+pub(crate) fn fit_weighted<P: WeightedProblem>(
+    problem: &mut P,
+    start: &MotorParams,
+    settings: LmSettings,
+) -> Result<FullFit, FitError> {
     let theta0: Vec<f64> = start.values().iter().map(|v| v.ln()).collect();
-    let first = solve(&problem, &theta0, settings)?;
+    let first = solve(&*problem, &theta0, settings)?;
     // Second stage: weight each channel by its own residual RMS at the first solution, so that
     // every channel's weighted residuals have unit variance and the pooled variance behind the
     // intervals describes each of them (feasible generalised least squares). Skipped when the
@@ -382,23 +382,17 @@ pub fn identify_full(
     let first_iterations = first.iterations;
     let (report, iterations) = match params_of::<f64>(&first.params, |v, _| v) {
         Some(values) if first.termination.converged() => {
-            let rms = channel_quality(&problem, values);
+            let rms = problem.channel_quality(values);
             let mut changed = false;
-            for (ch, q) in problem
-                .tests
-                .iter_mut()
-                .flat_map(|w| w.channels.iter_mut())
-                .zip(&rms)
-            {
-                if q.rms_residual > 1e3 * ch.sigma * f64::EPSILON.sqrt()
-                    && q.rms_residual.is_finite()
+            for (sigma, q) in problem.sigmas_mut().into_iter().zip(&rms) {
+                if q.rms_residual > 1e3 * *sigma * f64::EPSILON.sqrt() && q.rms_residual.is_finite()
                 {
-                    ch.sigma = q.rms_residual;
+                    *sigma = q.rms_residual;
                     changed = true;
                 }
             }
             if changed {
-                let second = solve(&problem, &first.params, settings)?;
+                let second = solve(&*problem, &first.params, settings)?;
                 let total = first_iterations + second.iterations;
                 (second, total)
             } else {
@@ -424,7 +418,7 @@ pub fn identify_full(
             [values[i] - half, values[i] + half]
         })
     });
-    let quality = channel_quality(&problem, values);
+    let quality = problem.channel_quality(values);
     Ok(FullFit {
         params,
         std_error,
@@ -435,6 +429,28 @@ pub fn identify_full(
         termination: report.termination,
         cost: report.normal.cost,
     })
+}
+
+/// Quality of one channel from its sums: `sse = Σ(ŷ − y)²`, `sst = Σ(y − ȳ)²`, `n` samples.
+pub(crate) fn quality_from_sums(
+    test: usize,
+    channel: Channel,
+    noise_std: f64,
+    sse: f64,
+    sst: f64,
+    n: usize,
+) -> ChannelQuality {
+    ChannelQuality {
+        test,
+        channel,
+        noise_std,
+        rms_residual: (sse / n.max(1) as f64).sqrt(),
+        nrmse_fit_percent: if sst > 0.0 {
+            100.0 * (1.0 - (sse / sst).sqrt())
+        } else {
+            f64::NAN
+        },
+    }
 }
 
 fn channel_quality(problem: &FullProblem, values: [f64; 6]) -> Vec<ChannelQuality> {
@@ -462,18 +478,32 @@ fn channel_quality(problem: &FullProblem, values: [f64; 6]) -> Vec<ChannelQualit
     for (k, w) in problem.tests.iter().enumerate() {
         for (c, ch) in w.channels.iter().enumerate() {
             let (sse, sst) = sums[k][c];
-            out.push(ChannelQuality {
-                test: k,
-                channel: ch.kind,
-                noise_std: ch.sigma,
-                rms_residual: (sse / ch.data.len().max(1) as f64).sqrt(),
-                nrmse_fit_percent: if sst > 0.0 {
-                    100.0 * (1.0 - (sse / sst).sqrt())
-                } else {
-                    f64::NAN
-                },
-            });
+            out.push(quality_from_sums(
+                k,
+                ch.kind,
+                ch.sigma,
+                sse,
+                sst,
+                ch.data.len(),
+            ));
         }
     }
     out
+}
+
+impl WeightedProblem for FullProblem {
+    fn sigmas_mut(&mut self) -> Vec<&mut f64> {
+        self.tests
+            .iter_mut()
+            .flat_map(|w| w.channels.iter_mut().map(|c| &mut c.sigma))
+            .collect()
+    }
+
+    fn channel_quality(&self, values: [f64; 6]) -> Vec<ChannelQuality> {
+        channel_quality(self, values)
+    }
+
+    fn score_covariance(&self, theta: &[f64]) -> Option<DMatrix<f64>> {
+        FullProblem::score_covariance(self, theta)
+    }
 }

@@ -30,6 +30,7 @@ mod full_model;
 mod lm;
 mod mechanical;
 mod model33;
+mod output_error;
 mod paper_method;
 mod signal;
 mod start;
@@ -49,6 +50,7 @@ pub use mechanical::{
     identify_inverse_model, InverseModelSettings, MechanicalFit, MECHANICAL_NAMES,
 };
 pub use model33::{fit_33, Fit33, Params33, Record33};
+pub use output_error::{equation_error_start, identify_output_error, voltage_input, ExcitedRecord};
 pub use paper_method::{
     from_high_voltage, identify_paper, speed_check_c8, suggested_low_voltage_45,
     tau_m_as_printed_37, with_low_voltage, HighVoltageResult, PaperIdentification, SpeedCheck,
@@ -57,7 +59,7 @@ pub use paper_method::{
 pub use signal::{decimate, Butterworth};
 pub use start::steady_state_start;
 pub use stats::{
-    newey_west_lags, sandwich_uncertainty, student_t_quantile, uncertainty, Uncertainty,
+    newey_west_lags, sandwich_uncertainty, student_t_quantile, uncertainty, NeweyWest, Uncertainty,
 };
 pub use steady_fit::{fit_apparent_resistance, SteadyFit};
 pub use step_location::{locate_step, StepLocation};

@@ -113,6 +113,62 @@ pub fn newey_west_lags(n: usize) -> usize {
     (4.0 * (n as f64 / 100.0).powf(2.0 / 9.0)).floor() as usize
 }
 
+/// Newey–West accumulator of the covariance of a score `Σᵢ gᵢ` over one time series of
+/// per-sample scores `gᵢ = rᵢ ∂rᵢ/∂θ` (`N` parameters):
+/// `Σᵢ gᵢgᵢᵀ + Σₗ wₗ Σᵢ (gᵢgᵢ₋ₗᵀ + gᵢ₋ₗgᵢᵀ)` with Bartlett weights `wₗ = 1 − l/(L+1)`.
+/// Feed one series (a channel of a record) with [`NeweyWest::push`], then call
+/// [`NeweyWest::new_series`] before the next; series are taken as independent of each other.
+#[derive(Debug, Clone)]
+pub struct NeweyWest<const N: usize> {
+    sum: [[f64; N]; N],
+    ring: Vec<[f64; N]>,
+    seen: usize,
+}
+
+impl<const N: usize> NeweyWest<N> {
+    /// An empty accumulator for series of about `n` samples ([`newey_west_lags`]).
+    pub fn new(n: usize) -> Self {
+        NeweyWest {
+            sum: [[0.0; N]; N],
+            ring: vec![[0.0; N]; newey_west_lags(n).max(1)],
+            seen: 0,
+        }
+    }
+
+    /// Starts a new independent series of about `n` samples.
+    pub fn new_series(&mut self, n: usize) {
+        self.ring = vec![[0.0; N]; newey_west_lags(n).max(1)];
+        self.seen = 0;
+    }
+
+    /// Adds the next score of the current series.
+    pub fn push(&mut self, g: [f64; N]) {
+        let lags = self.ring.len();
+        for a in 0..N {
+            for b in 0..N {
+                self.sum[a][b] += g[a] * g[b];
+            }
+        }
+        for l in 1..=lags.min(self.seen) {
+            let weight = 1.0 - l as f64 / (lags as f64 + 1.0);
+            let past = self.ring[(self.seen - l) % lags];
+            for a in 0..N {
+                for b in 0..N {
+                    self.sum[a][b] += weight * (g[a] * past[b] + past[a] * g[b]);
+                }
+            }
+        }
+        self.ring[self.seen % lags] = g;
+        self.seen += 1;
+    }
+
+    /// The accumulated covariance, `None` if any entry is not finite.
+    pub fn finish(&self) -> Option<DMatrix<f64>> {
+        let m = DMatrix::from_fn(N, N, |a, b| self.sum[a][b]);
+        m.iter().all(|v| v.is_finite()).then_some(m)
+    }
+}
+
 /// The `p`-quantile of Student's t distribution with `nu` degrees of freedom (`0 < p < 1`).
 ///
 /// Bisection on the CDF, `F(t) = 1 − ½ I_{ν/(ν+t²)}(ν/2, ½)` for `t > 0`, with the regularised

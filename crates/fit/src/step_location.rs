@@ -55,27 +55,35 @@ pub fn locate_step(t: &[f64], voltage: &[f64]) -> Result<StepLocation, FitError>
     // samples is unbiased while the median sticks to one code (half an LSB off at worst).
     let after = &voltage[index..];
     let volts = after.iter().sum::<f64>() / after.len() as f64;
-    let mut steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-    if let Some(i) = steps.iter().position(|d| d.is_nan() || *d <= 0.0) {
-        return Err(bad(
-            "time",
-            format!("sample {} (t = {} s) does not come after the one before it (t = {} s): time must increase strictly", i + 1, t[i + 1], t[i]),
-        ));
-    }
-    let mid = steps.len() / 2;
-    let dt = *steps.select_nth_unstable_by(mid, f64::total_cmp).1;
-    for (i, w) in t.windows(2).enumerate().skip(index) {
-        if ((w[1] - w[0]) - dt).abs() > GRID_TOLERANCE * dt {
-            return Err(bad(
-                "time",
-                format!("sample {} (t = {} s) breaks the uniform {dt} s grid: a step test needs uniform sampling", i + 1, w[1]),
-            ));
-        }
-    }
+    let dt = uniform_period(t, index, "a step test")?;
     Ok(StepLocation {
         index,
         volts,
         dt,
         t_step: t[index],
     })
+}
+
+/// The sample period \[s\] of `t`: strictly increasing, and uniform (to 0.1 %) from sample
+/// `from` on; `purpose` names what needs the uniform grid in the error.
+pub(crate) fn uniform_period(t: &[f64], from: usize, purpose: &str) -> Result<f64, FitError> {
+    let bad = |reason: String| FitError::BadData {
+        series: "time".into(),
+        reason,
+    };
+    let mut steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    if steps.is_empty() {
+        return Err(bad(format!("{} samples: no sample period", t.len())));
+    }
+    if let Some(i) = steps.iter().position(|d| d.is_nan() || *d <= 0.0) {
+        return Err(bad(format!("sample {} (t = {} s) does not come after the one before it (t = {} s): time must increase strictly", i + 1, t[i + 1], t[i])));
+    }
+    let mid = steps.len() / 2;
+    let dt = *steps.select_nth_unstable_by(mid, f64::total_cmp).1;
+    for (i, w) in t.windows(2).enumerate().skip(from) {
+        if ((w[1] - w[0]) - dt).abs() > GRID_TOLERANCE * dt {
+            return Err(bad(format!("sample {} (t = {} s) breaks the uniform {dt} s grid: {purpose} needs uniform sampling", i + 1, w[1])));
+        }
+    }
+    Ok(dt)
 }

@@ -129,3 +129,51 @@ fn stuck_intervals_match_the_analytic_breakaway_condition() {
         "only {checked} stuck intervals ended inside the record"
     );
 }
+
+/// A staircase with a reversal and a hold at 0 V: each level settles to the steady state of
+/// Eq. (2) at that level whatever came before, and the rotor sticks while the hold lasts.
+#[test]
+fn staircase_levels_reach_their_own_steady_states() {
+    let p = MotorParams::paper();
+    let levels = [(1.0, 20.0), (101.0, -10.0), (201.0, 0.0), (251.0, 40.0)];
+    let input = Input::piecewise(&levels).unwrap();
+    let trace = Simulator::new(p, Effects::none(), input)
+        .unwrap()
+        .run(350.0, 100.0)
+        .unwrap();
+    // Last sample before each change, and the end.
+    for (k, &(_, volts)) in levels.iter().enumerate() {
+        let t_end = levels.get(k + 1).map_or(350.0, |l| l.0 - 0.01);
+        let i = (t_end * 100.0_f64).round() as usize;
+        assert_eq!(trace.voltage[i], volts, "level {k}");
+        let steady = motor_model::steady_state(&p, volts);
+        assert!(
+            (trace.speed[i] - steady.speed_rad_s).abs() < 1e-3 * (1.0 + steady.speed_rad_s.abs()),
+            "level {k}: speed {} vs steady {}",
+            trace.speed[i],
+            steady.speed_rad_s
+        );
+        assert!(
+            (trace.current[i] - steady.current_a).abs() < 1e-3 * (1.0 + steady.current_a.abs()),
+            "level {k}: current {} vs steady {}",
+            trace.current[i],
+            steady.current_a
+        );
+    }
+    // Stuck through the 0 V hold once the rotor has stopped.
+    assert!(trace.stuck[240 * 100..251 * 100].iter().all(|&s| s));
+    // A single level equals the step input sample for sample.
+    let step = Simulator::new(p, Effects::none(), Input::step(20.0, 1.0).unwrap())
+        .unwrap()
+        .run(20.0, 100.0)
+        .unwrap();
+    let one = Simulator::new(
+        p,
+        Effects::none(),
+        Input::piecewise(&[(1.0, 20.0)]).unwrap(),
+    )
+    .unwrap()
+    .run(20.0, 100.0)
+    .unwrap();
+    assert_eq!(step, one);
+}

@@ -100,6 +100,21 @@ impl Simulator {
         })
     }
 
+    /// The longest RK4 step \[s\] the integrator takes: 1/40 of the fastest time constant.
+    pub fn max_step_s(&self) -> f64 {
+        self.max_step_s
+    }
+
+    /// The same simulator with its longest RK4 step set to `max_step_s` \[s\] (at most the
+    /// default of [`Simulator::max_step_s`]). A fit that differentiates the simulation with
+    /// respect to the parameters fixes the step this way, so that the step count does not jump
+    /// between neighbouring parameter values.
+    pub fn with_max_step(mut self, max_step_s: f64) -> Result<Self, ModelError> {
+        let h = positive("max step", max_step_s)?;
+        self.max_step_s = self.max_step_s.min(h);
+        Ok(self)
+    }
+
     /// Simulates `duration_s` \[s\] from rest, sampled at `rate_hz` \[Hz\] (`t = 0, 1/rate, …`).
     pub fn run(&self, duration_s: f64, rate_hz: f64) -> Result<Trace, ModelError> {
         let (n, dt) = sample_grid(duration_s, rate_hz)?;
@@ -117,12 +132,10 @@ impl Simulator {
         let mut t = 0.0;
         for i in 0..n {
             let t_i = i as f64 * dt;
-            // Integrate to t_i, splitting at a jump of E(t).
-            if let Some(t_jump) = self.input.discontinuity() {
-                if t < t_jump && t_jump < t_i {
-                    self.integrate(&mut x, &mut mode, t, t_jump);
-                    t = t_jump;
-                }
+            // Integrate to t_i, splitting at every jump of E(t) on the way.
+            while let Some(t_jump) = self.input.next_jump_after(t).filter(|&tj| tj < t_i) {
+                self.integrate(&mut x, &mut mode, t, t_jump);
+                t = t_jump;
             }
             if t_i > t {
                 self.integrate(&mut x, &mut mode, t, t_i);

@@ -1,0 +1,544 @@
+//! Output-error identification of R, L, k, f, J and Ts from records of any voltage waveform.
+//!
+//! The model is the stick-slip simulator of Appendix D (`motor_model::Simulator`, nominal model:
+//! Eq. (2) with Coulomb friction, stuck while `|k I| ≤ Ts`) driven by each record's own voltage
+//! ([`voltage_input`]): staircases, PRBS, sines, reversals, several steps in one record. The
+//! residuals are `(simulated − measured)/σ_channel` over the channels given (current, and the
+//! tachometer speed or the encoder angle through its central difference, as in
+//! [`crate::identify_full`]); samples flagged as clipped are left out. Parameters are fitted as
+//! `θ = ln p`; the Jacobian is by forward differences in θ (step 1e-6) on a simulation whose
+//! RK4 step is fixed for the whole fit, so that the simulated output is a smooth function of θ.
+//!
+//! Every record must start with the motor at rest and no current (pre-trigger samples, or the
+//! first change of voltage at the first sample): the simulation starts from rest.
+
+use motor_model::{central_difference, Effects, Input, MotorParams, Simulator};
+use nalgebra::{DMatrix, DVector};
+
+use crate::error::FitError;
+use crate::full_model::{
+    fit_weighted, noise_std, quality_from_sums, Channel, ChannelQuality, FullFit, WeightedProblem,
+};
+use crate::lm::{LeastSquares, LmSettings, NormalEquations};
+use crate::mechanical::{identify_inverse_model, InverseModelSettings};
+use crate::signal::Butterworth;
+use crate::stats::NeweyWest;
+use crate::step_location::uniform_period;
+
+/// Step of the forward-difference Jacobian in `θ = ln p` (relative step of each parameter).
+const FD_STEP: f64 = 1e-6;
+/// Fraction of the start's own RK4 step used for the whole fit (room for faster parameters).
+const STEP_MARGIN: f64 = 0.5;
+/// A voltage is piecewise constant when it has at most one jump per this many samples.
+const MIN_SAMPLES_PER_LEVEL: usize = 20;
+
+/// One record of any excitation, on a uniform grid starting at the record's first sample.
+#[derive(Debug, Clone, Copy)]
+pub struct ExcitedRecord<'a> {
+    /// The armature voltage applied, with time measured from the record's first sample
+    /// ([`voltage_input`] builds it from a measured voltage column).
+    pub input: &'a Input,
+    /// Sample period \[s\].
+    pub dt: f64,
+    /// Armature current \[A\].
+    pub current: &'a [f64],
+    /// Speed \[rad/s\] measured directly (tachometer), if any. Not used when `position` is given.
+    pub speed: Option<&'a [f64]>,
+    /// Encoder angle \[rad\] (any offset), if measured.
+    pub position: Option<&'a [f64]>,
+    /// Samples of the current to leave out (clipped at an ADC rail), if any.
+    pub exclude_current: Option<&'a [bool]>,
+    /// Samples of the speed or angle to leave out, if any.
+    pub exclude_speed: Option<&'a [bool]>,
+}
+
+fn bad(series: impl Into<String>, reason: String) -> FitError {
+    FitError::BadData {
+        series: series.into(),
+        reason,
+    }
+}
+
+/// The waveform a measured voltage column describes, time measured from `t[0]`.
+///
+/// When the voltage is piecewise constant (a step, staircase, PRBS or reversal: jumps larger
+/// than 10 noise levels and 0.1 % of the range, at most one per 20 samples, flat in between to
+/// within 4 noise levels) each level is the mean of its samples — the ADC noise averages out —
+/// and starts at its first sample. Otherwise the samples themselves are replayed, linearly
+/// interpolated. `t` must be uniform (0.1 %).
+pub fn voltage_input(t: &[f64], voltage: &[f64]) -> Result<Input, FitError> {
+    if t.len() != voltage.len() {
+        return Err(bad(
+            "voltage",
+            format!(
+                "{} samples where the time has {}: the channels must align",
+                voltage.len(),
+                t.len()
+            ),
+        ));
+    }
+    let dt = uniform_period(t, 0, "an output-error fit")?;
+    if let Some((i, v)) = voltage.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(bad("voltage", format!("sample {i} is {v}")));
+    }
+    let (lo, hi) = voltage
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        });
+    let sigma = noise_std(voltage);
+    let threshold = (10.0 * sigma).max(1e-3 * (hi - lo));
+    let mut starts = vec![0usize];
+    for i in 1..voltage.len() {
+        if (voltage[i] - voltage[i - 1]).abs() > threshold {
+            starts.push(i);
+        }
+    }
+    let sampled = || Input::sampled(0.0, dt, voltage.to_vec());
+    if starts.len() * MIN_SAMPLES_PER_LEVEL > voltage.len() {
+        return sampled().map_err(|e| bad("voltage", e.to_string()));
+    }
+    let mut steps = Vec::with_capacity(starts.len());
+    for (j, &s) in starts.iter().enumerate() {
+        let e = starts.get(j + 1).copied().unwrap_or(voltage.len());
+        let seg = &voltage[s..e];
+        let mean = seg.iter().sum::<f64>() / seg.len() as f64;
+        let rms = (seg.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / seg.len() as f64).sqrt();
+        if rms > 4.0 * sigma + 1e-3 * (hi - lo) {
+            // Not flat between jumps (a sine, a ramp): replay the samples.
+            return sampled().map_err(|e| bad("voltage", e.to_string()));
+        }
+        steps.push((t[s] - t[0], mean));
+    }
+    Input::piecewise(&steps).map_err(|e| bad("voltage", e.to_string()))
+}
+
+/// A channel of one record: its data at the kept samples and its weight.
+struct OeChannel {
+    kind: Channel,
+    /// Indices of the samples fitted.
+    keep: Vec<usize>,
+    /// Measured values at `keep`.
+    data: Vec<f64>,
+    sigma: f64,
+}
+
+struct OeRecord {
+    input: Input,
+    dt: f64,
+    n: usize,
+    channels: Vec<OeChannel>,
+}
+
+struct OeProblem {
+    records: Vec<OeRecord>,
+    n_residuals: usize,
+    max_step_s: f64,
+}
+
+/// `exp θ` as parameters, if representable.
+fn values_of(theta: &[f64]) -> Option<[f64; 6]> {
+    (theta.len() == 6 && theta.iter().all(|t| t.is_finite() && t.abs() < 700.0))
+        .then(|| std::array::from_fn(|i| theta[i].exp()))
+}
+
+impl OeProblem {
+    /// The simulated channels of every record at `values`: `[record][channel][kept sample]`.
+    fn simulate(&self, values: [f64; 6]) -> Option<Vec<Vec<Vec<f64>>>> {
+        let params = MotorParams::from_values(values).ok()?;
+        let mut out = Vec::with_capacity(self.records.len());
+        for rec in &self.records {
+            let sim = Simulator::new(params, Effects::none(), rec.input.clone())
+                .and_then(|s| s.with_max_step(self.max_step_s))
+                .ok()?;
+            let rate = 1.0 / rec.dt;
+            // n samples: t = 0 … (n − 1) dt, half a period of slack against rounding.
+            let trace = sim.run((rec.n as f64 - 0.5) / rate, rate).ok()?;
+            if trace.t.len() != rec.n {
+                return None;
+            }
+            let mut encoder: Option<Vec<f64>> = None;
+            let channels = rec
+                .channels
+                .iter()
+                .map(|ch| {
+                    let full: &[f64] = match ch.kind {
+                        Channel::Current => &trace.current,
+                        Channel::Speed => &trace.speed,
+                        Channel::EncoderSpeed => encoder
+                            .get_or_insert_with(|| central_difference(&trace.t, &trace.position)),
+                    };
+                    ch.keep.iter().map(|&i| full[i]).collect()
+                })
+                .collect();
+            out.push(channels);
+        }
+        out.iter()
+            .flatten()
+            .flatten()
+            .all(|v: &f64| v.is_finite())
+            .then_some(out)
+    }
+
+    /// Weighted residuals at `values`, in record/channel/sample order.
+    fn residuals(&self, values: [f64; 6]) -> Option<Vec<f64>> {
+        let sim = self.simulate(values)?;
+        let mut r = Vec::with_capacity(self.n_residuals);
+        for (rec, simulated) in self.records.iter().zip(&sim) {
+            for (ch, model) in rec.channels.iter().zip(simulated) {
+                r.extend(ch.data.iter().zip(model).map(|(y, m)| (m - y) / ch.sigma));
+            }
+        }
+        Some(r)
+    }
+
+    /// Residuals and their Jacobian in θ (forward differences, the six perturbed simulations
+    /// run in parallel).
+    fn jacobian(&self, theta: &[f64]) -> Option<(Vec<f64>, DMatrix<f64>)> {
+        let r0 = self.residuals(values_of(theta)?)?;
+        let columns: Vec<Option<Vec<f64>>> = std::thread::scope(|scope| {
+            let handles: Vec<_> = (0..6)
+                .map(|j| {
+                    let r0 = &r0;
+                    scope.spawn(move || {
+                        let mut th = theta.to_vec();
+                        th[j] += FD_STEP;
+                        let r = self.residuals(values_of(&th)?)?;
+                        Some(r.iter().zip(r0).map(|(a, b)| (a - b) / FD_STEP).collect())
+                    })
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| h.join().ok().flatten())
+                .collect()
+        });
+        let mut jac = DMatrix::zeros(r0.len(), 6);
+        for (j, col) in columns.into_iter().enumerate() {
+            let col = col?;
+            jac.column_mut(j).copy_from_slice(&col);
+        }
+        Some((r0, jac))
+    }
+}
+
+impl LeastSquares for OeProblem {
+    fn n_params(&self) -> usize {
+        6
+    }
+
+    fn cost(&self, theta: &[f64]) -> Option<f64> {
+        let r = self.residuals(values_of(theta)?)?;
+        Some(0.5 * r.iter().map(|v| v * v).sum::<f64>())
+    }
+
+    fn normal_equations(&self, theta: &[f64]) -> Option<NormalEquations> {
+        let (r, jac) = self.jacobian(theta)?;
+        let r = DVector::from_vec(r);
+        let jtj = jac.tr_mul(&jac);
+        let jtr = jac.tr_mul(&r);
+        Some(NormalEquations {
+            jtj,
+            jtr,
+            cost: 0.5 * r.norm_squared(),
+            n_residuals: self.n_residuals,
+        })
+    }
+}
+
+impl WeightedProblem for OeProblem {
+    fn sigmas_mut(&mut self) -> Vec<&mut f64> {
+        self.records
+            .iter_mut()
+            .flat_map(|r| r.channels.iter_mut().map(|c| &mut c.sigma))
+            .collect()
+    }
+
+    fn channel_quality(&self, values: [f64; 6]) -> Vec<ChannelQuality> {
+        let sim = self.simulate(values);
+        let mut out = Vec::new();
+        for (k, rec) in self.records.iter().enumerate() {
+            for (c, ch) in rec.channels.iter().enumerate() {
+                let n = ch.data.len();
+                let mean = ch.data.iter().sum::<f64>() / n.max(1) as f64;
+                let sst = ch.data.iter().map(|y| (y - mean).powi(2)).sum::<f64>();
+                let sse = sim.as_ref().map_or(f64::NAN, |s| {
+                    s[k][c]
+                        .iter()
+                        .zip(&ch.data)
+                        .map(|(m, y)| (m - y).powi(2))
+                        .sum()
+                });
+                out.push(quality_from_sums(k, ch.kind, ch.sigma, sse, sst, n));
+            }
+        }
+        out
+    }
+
+    fn score_covariance(&self, theta: &[f64]) -> Option<DMatrix<f64>> {
+        let (r, jac) = self.jacobian(theta)?;
+        let mut total = DMatrix::zeros(6, 6);
+        let mut row = 0;
+        for rec in &self.records {
+            for ch in &rec.channels {
+                let mut nw = NeweyWest::<6>::new(ch.data.len());
+                for _ in 0..ch.data.len() {
+                    nw.push(std::array::from_fn(|j| r[row] * jac[(row, j)]));
+                    row += 1;
+                }
+                total += nw.finish()?;
+            }
+        }
+        Some(total)
+    }
+}
+
+/// Checks one record's channels and builds its fitted channels.
+fn prepare(k: usize, rec: &ExcitedRecord<'_>) -> Result<OeRecord, FitError> {
+    let label = format!("record {}", k + 1);
+    let n = rec.current.len();
+    if n < crate::checks::MIN_SAMPLES {
+        return Err(bad(
+            label,
+            format!(
+                "{n} samples: at least {} are needed",
+                crate::checks::MIN_SAMPLES
+            ),
+        ));
+    }
+    if !(rec.dt.is_finite() && rec.dt > 0.0) {
+        return Err(bad(
+            label,
+            format!("sample period {} s: expected a positive period", rec.dt),
+        ));
+    }
+    for (name, data) in [
+        ("current", Some(rec.current)),
+        ("speed", rec.speed),
+        ("position", rec.position),
+    ] {
+        let Some(y) = data else { continue };
+        if y.len() != n {
+            return Err(bad(
+                &label,
+                format!(
+                    "{name} has {} samples where the current has {n}: the channels must align",
+                    y.len()
+                ),
+            ));
+        }
+        if let Some((i, v)) = y.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err(bad(&label, format!("{name} sample {i} is {v}")));
+        }
+    }
+    for (name, mask) in [
+        ("current", rec.exclude_current),
+        ("speed", rec.exclude_speed),
+    ] {
+        if mask.is_some_and(|m| m.len() != n) {
+            return Err(bad(
+                &label,
+                format!("the {name} exclusion mask does not have {n} samples"),
+            ));
+        }
+    }
+    let channel = |kind: Channel, full: Vec<f64>, mask: Option<&[bool]>| {
+        let keep: Vec<usize> = (0..n).filter(|&i| !mask.is_some_and(|m| m[i])).collect();
+        let data: Vec<f64> = keep.iter().map(|&i| full[i]).collect();
+        OeChannel {
+            kind,
+            sigma: noise_std(&data),
+            keep,
+            data,
+        }
+    };
+    let mut channels = vec![channel(
+        Channel::Current,
+        rec.current.to_vec(),
+        rec.exclude_current,
+    )];
+    match (rec.position, rec.speed) {
+        (Some(angle), _) => {
+            let times: Vec<f64> = (0..n).map(|i| i as f64 * rec.dt).collect();
+            channels.push(channel(
+                Channel::EncoderSpeed,
+                central_difference(&times, angle),
+                rec.exclude_speed,
+            ));
+        }
+        (None, Some(speed)) => {
+            channels.push(channel(Channel::Speed, speed.to_vec(), rec.exclude_speed))
+        }
+        (None, None) => {}
+    }
+    for ch in &channels {
+        if ch.data.len() < crate::checks::MIN_SAMPLES {
+            return Err(bad(&label, format!("only {} {} samples are left once the clipped ones are excluded: widen the ADC range", ch.data.len(), ch.kind.name())));
+        }
+    }
+    Ok(OeRecord {
+        input: rec.input.clone(),
+        dt: rec.dt,
+        n,
+        channels,
+    })
+}
+
+/// Identifies R, L, k, f, J, Ts from records of any voltage waveform (output error through
+/// the stick-slip simulator), starting from `start` (e.g. [`equation_error_start`]).
+pub fn identify_output_error(
+    records: &[ExcitedRecord<'_>],
+    start: &MotorParams,
+    settings: LmSettings,
+) -> Result<FullFit, FitError> {
+    start
+        .validate()
+        .map_err(|e| bad("start parameters", e.to_string()))?;
+    if start.ts_nm <= 0.0 {
+        return Err(bad(
+            "start parameters",
+            "Ts = 0: the fit works on ln Ts and needs a positive start".into(),
+        ));
+    }
+    if records.is_empty() {
+        return Err(bad("records", "no record given".into()));
+    }
+    let prepared = records
+        .iter()
+        .enumerate()
+        .map(|(k, r)| prepare(k, r))
+        .collect::<Result<Vec<_>, _>>()?;
+    let n_residuals = prepared
+        .iter()
+        .flat_map(|r| &r.channels)
+        .map(|c| c.data.len())
+        .sum();
+    let max_step_s = Simulator::new(
+        *start,
+        Effects::none(),
+        Input::Step {
+            volts: 1.0,
+            at_s: 0.0,
+        },
+    )
+    .map_err(|e| bad("start parameters", e.to_string()))?
+    .max_step_s()
+        * STEP_MARGIN;
+    let mut problem = OeProblem {
+        records: prepared,
+        n_residuals,
+        max_step_s,
+    };
+    fit_weighted(&mut problem, start, settings)
+}
+
+/// A start for [`identify_output_error`] by equation error: the measured signals, low-passed
+/// forward and backward (zero phase, 4th-order Butterworth at a tenth of the sample rate), are
+/// put into the model's equations, which are linear in the parameters:
+/// Eq. (2a) `E = R I + L dI/dt + k Ω` gives R, L, k by least squares over every sample, and
+/// Eq. (2b) `k I = J dΩ/dt + f Ω + Ts sign Ω` the rest (the inverse model of
+/// [`crate::identify_inverse_model`] on the motor torque `k I`). Values the records cannot
+/// resolve (an L below one sample, no friction seen) are replaced by small positive ones.
+pub fn equation_error_start(records: &[ExcitedRecord<'_>]) -> Result<MotorParams, FitError> {
+    let domain = |reason: String| FitError::MethodDomain {
+        equation: "equation-error start (Eq. (2))",
+        reason,
+    };
+    let mut ata = nalgebra::Matrix3::<f64>::zeros();
+    let mut atb = nalgebra::Vector3::<f64>::zeros();
+    let mut per_record = Vec::new();
+    for (k, rec) in records.iter().enumerate() {
+        let n = rec.current.len();
+        let dt = rec.dt;
+        if n < crate::checks::MIN_SAMPLES || dt.is_nan() || dt <= 0.0 {
+            return Err(bad(
+                format!("record {}", k + 1),
+                format!("{n} samples, period {dt} s: too short for a start"),
+            ));
+        }
+        let times: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
+        let position: Vec<f64> = match (rec.position, rec.speed) {
+            (Some(p), _) => p.to_vec(),
+            (None, Some(w)) => {
+                // The angle as the running trapezoid integral of the tachometer speed.
+                let mut theta = Vec::with_capacity(n);
+                let mut acc = 0.0;
+                theta.push(0.0);
+                for i in 1..n {
+                    acc += 0.5 * (w[i] + w[i - 1]) * dt;
+                    theta.push(acc);
+                }
+                theta
+            }
+            (None, None) => {
+                return Err(domain(format!(
+                    "record {} has neither speed nor position: k, f and J need one of them",
+                    k + 1
+                )))
+            }
+        };
+        let filter = Butterworth::low_pass(4, 0.1 / dt, 1.0 / dt)?;
+        let i_f = filter.filtfilt(rec.current);
+        let th_f = filter.filtfilt(&position);
+        let w_f = central_difference(&times, &th_f);
+        let di = central_difference(&times, &i_f);
+        for j in 0..n {
+            let e = rec.input.volts_at(times[j]);
+            let row = nalgebra::Vector3::new(i_f[j], di[j], w_f[j]);
+            ata += row * row.transpose();
+            atb += row * e;
+        }
+        per_record.push((dt, position));
+    }
+    let x = ata.cholesky().map(|c| c.solve(&atb)).ok_or_else(|| {
+        domain(
+            "the voltage equation is singular: does the motor move, and does the voltage vary?"
+                .into(),
+        )
+    })?;
+    let (r, mut l, k) = (x[0], x[1], x[2]);
+    if !(r > 0.0 && k > 0.0 && r.is_finite() && k.is_finite()) {
+        return Err(domain(format!(
+            "R = {r:.4e} Ω, k = {k:.4e} N·m/A from the voltage equation: is the current or speed sign reversed?"
+        )));
+    }
+    let dt_min = per_record.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
+    if !(l > 0.0 && l.is_finite()) {
+        l = 0.5 * r * dt_min;
+    }
+    // The mechanical side on the motor torque k I, record by record, pooled by sample count.
+    let (mut sum, mut weight) = ([0.0; 3], 0.0);
+    for (rec, (dt, position)) in records.iter().zip(&per_record) {
+        let torque: Vec<f64> = rec.current.iter().map(|i| k * i).collect();
+        let settings = InverseModelSettings {
+            position_cutoff_hz: 0.1 / dt,
+            position_filter_order: 4,
+            decimation: 1,
+        };
+        if let Ok(m) = identify_inverse_model(*dt, &torque, position, settings) {
+            let w = rec.current.len() as f64;
+            for (s, v) in sum.iter_mut().zip(m.values) {
+                *s += w * v;
+            }
+            weight += w;
+        }
+    }
+    if weight == 0.0 {
+        return Err(domain(
+            "no record lets the torque equation be solved: the motor must move".into(),
+        ));
+    }
+    let [j, f, ts] = sum.map(|s| s / weight);
+    if !(j > 0.0 && j.is_finite()) {
+        return Err(domain(format!(
+            "J = {j:.4e} kg·m² from the torque equation: the records show too little acceleration"
+        )));
+    }
+    let f = if f > 0.0 { f } else { 1e-3 * k * k / r };
+    let peak_torque = records
+        .iter()
+        .flat_map(|r| r.current.iter())
+        .fold(0.0f64, |m, i| m.max((k * i).abs()));
+    let ts = if ts > 0.0 { ts } else { 1e-3 * peak_torque };
+    MotorParams::new(r, l, k, f, j, ts).map_err(|e| domain(e.to_string()))
+}
