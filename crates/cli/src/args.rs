@@ -193,13 +193,20 @@ pub struct SimulateArgs {
     #[arg(
         long,
         value_name = "VOLTS",
-        allow_hyphen_values = true,
-        conflicts_with = "sine"
+        allow_hyphen_values = true
     )]
     pub voltage: Option<f64>,
     /// Sine input AMP,FREQ: amplitude [V] and frequency [Hz] (Appendix D: 0.1,0.05).
     #[arg(long, value_name = "AMP,FREQ", allow_hyphen_values = true)]
     pub sine: Option<String>,
+    /// Staircase TIME:VOLTS,... : each level [V] holds from its time [s] (0 V before the first),
+    /// e.g. 0.5:40,40.5:-20,80.5:0,100.5:2.5 (a reversal, a coast, a low-voltage breakaway).
+    #[arg(long, value_name = "T:V,...", allow_hyphen_values = true)]
+    pub levels: Option<String>,
+    /// Pseudo-random binary sequence VOLTS,BIT[,SEED]: ±VOLTS, the sign drawn every BIT
+    /// seconds, from --step-at on.
+    #[arg(long, value_name = "VOLTS,BIT[,SEED]", allow_hyphen_values = true)]
+    pub prbs: Option<String>,
     /// Instant of the step [s]; samples before it are pre-trigger samples at 0 V.
     #[arg(
         long,

@@ -48,19 +48,77 @@ pub fn pair(option: &str, text: &str) -> Result<(f64, f64)> {
     }
 }
 
-/// The input waveform: a step of `--voltage` at `--step-at`, or `--sine AMP,FREQ`.
-pub fn input(voltage: Option<f64>, sine: Option<&str>, step_at: f64) -> Result<Input> {
-    let input = match (voltage, sine) {
-        (Some(v), None) => Input::step(v, step_at),
-        (None, Some(s)) => {
-            let (amp, freq) = pair("--sine", s)?;
-            Input::sine(amp, freq)
-        }
-        _ => {
-            return Err(BadInput(
-                "give the input: --voltage VOLTS (a step) or --sine AMP,FREQ".into(),
-            )
-            .into())
+/// The input waveform options of `motorid simulate`.
+#[derive(Debug, Clone, Copy)]
+pub struct InputSpec<'a> {
+    /// `--voltage`: a step \[V\] at `step_at`.
+    pub voltage: Option<f64>,
+    /// `--sine AMP,FREQ`.
+    pub sine: Option<&'a str>,
+    /// `--levels T:V,...`: a staircase.
+    pub levels: Option<&'a str>,
+    /// `--prbs VOLTS,BIT[,SEED]`: a PRBS from `step_at` to `duration`.
+    pub prbs: Option<&'a str>,
+    /// `--step-at` \[s\].
+    pub step_at: f64,
+    /// `--duration` \[s\].
+    pub duration: f64,
+}
+
+/// The input waveform: a step of `--voltage` at `--step-at`, `--sine AMP,FREQ`, a staircase
+/// `--levels T:V,...` or `--prbs VOLTS,BIT[,SEED]` (from `--step-at` on).
+pub fn input(spec: InputSpec<'_>) -> Result<Input> {
+    let given = [
+        spec.voltage.is_some(),
+        spec.sine.is_some(),
+        spec.levels.is_some(),
+        spec.prbs.is_some(),
+    ];
+    if given.iter().filter(|&&g| g).count() != 1 {
+        return Err(BadInput(
+            "give one input: --voltage VOLTS (a step), --sine AMP,FREQ, --levels T:V,... (a staircase) or --prbs VOLTS,BIT[,SEED]".into(),
+        )
+        .into());
+    }
+    let input = if let Some(v) = spec.voltage {
+        Input::step(v, spec.step_at)
+    } else if let Some(s) = spec.sine {
+        let (amp, freq) = pair("--sine", s)?;
+        Input::sine(amp, freq)
+    } else if let Some(text) = spec.levels {
+        let steps = text
+            .split(',')
+            .map(str::trim)
+            .filter(|s| !s.is_empty())
+            .map(|item| {
+                item.split_once(':')
+                    .and_then(|(t, v)| Some((t.trim().parse().ok()?, v.trim().parse().ok()?)))
+                    .ok_or_else(|| {
+                        BadInput(format!(
+                            "--levels: `{item}` is not TIME:VOLTS, e.g. --levels 0.5:40,40:-20,80:0"
+                        ))
+                    })
+            })
+            .collect::<std::result::Result<Vec<(f64, f64)>, _>>()?;
+        Input::piecewise(&steps)
+    } else {
+        let text = spec.prbs.unwrap_or_default();
+        let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+        let number = |i: usize| parts.get(i).and_then(|p| p.parse::<f64>().ok());
+        let seed = match parts.get(2) {
+            None => Some(1),
+            Some(p) => p.parse::<u64>().ok(),
+        };
+        match (parts.len(), number(0), number(1), seed) {
+            (2 | 3, Some(volts), Some(bit), Some(seed)) => {
+                Input::prbs(volts, bit, spec.step_at, spec.duration, seed)
+            }
+            _ => {
+                return Err(BadInput(format!(
+                    "--prbs {text}: expected VOLTS,BIT_SECONDS[,SEED], e.g. --prbs 20,2,7"
+                ))
+                .into())
+            }
         }
     };
     input.map_err(|e| BadInput(e.to_string()).into())

@@ -433,7 +433,8 @@ pub fn identify_output_error(
 }
 
 /// A start for [`identify_output_error`] by equation error: the measured signals, low-passed
-/// forward and backward (zero phase, 4th-order Butterworth at a tenth of the sample rate), are
+/// forward and backward (zero phase, 4th-order Butterworth at a tenth of the sample rate; a
+/// fiftieth, with decimation by 5, for the angle), are
 /// put into the model's equations, which are linear in the parameters:
 /// Eq. (2a) `E = R I + L dI/dt + k Ω` gives R, L, k by least squares over every sample, and
 /// Eq. (2b) `k I = J dΩ/dt + f Ω + Ts sign Ω` the rest (the inverse model of
@@ -510,10 +511,13 @@ pub fn equation_error_start(records: &[ExcitedRecord<'_>]) -> Result<MotorParams
     let (mut sum, mut weight) = ([0.0; 3], 0.0);
     for (rec, (dt, position)) in records.iter().zip(&per_record) {
         let torque: Vec<f64> = rec.current.iter().map(|i| k * i).collect();
+        // Accelerations are second differences of a quantised angle: filter harder than the
+        // electrical side (a fiftieth of the rate) and average by decimation, or the noise in
+        // the acceleration regressor biases J towards zero.
         let settings = InverseModelSettings {
-            position_cutoff_hz: 0.1 / dt,
+            position_cutoff_hz: 0.02 / dt,
             position_filter_order: 4,
-            decimation: 1,
+            decimation: 5,
         };
         if let Ok(m) = identify_inverse_model(*dt, &torque, position, settings) {
             let w = rec.current.len() as f64;

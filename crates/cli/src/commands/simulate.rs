@@ -50,6 +50,17 @@ pub fn metadata(motor: &MotorParams, effects: &Effects, input: &Input) -> Vec<(S
             amplitude_v,
             frequency_hz,
         } => format!("sine {amplitude_v} V, {frequency_hz} Hz"),
+        Input::Piecewise { times_s, volts } => {
+            let levels: Vec<String> = times_s
+                .iter()
+                .zip(volts)
+                .map(|(t, v)| format!("{t}:{v}"))
+                .collect();
+            format!("levels {}", levels.join(","))
+        }
+        Input::Sampled { volts, dt_s, .. } => {
+            format!("sampled, {} samples every {dt_s} s", volts.len())
+        }
     };
     let effect_text = if effects.is_nominal() {
         "none".to_string()
@@ -74,7 +85,14 @@ pub fn metadata(motor: &MotorParams, effects: &Effects, input: &Input) -> Vec<(S
 
 pub fn run(a: &SimulateArgs) -> Result<()> {
     let motor = settings::motor(&a.motor.motor)?;
-    let input = settings::input(a.voltage, a.sine.as_deref(), a.step_at)?;
+    let input = settings::input(settings::InputSpec {
+        voltage: a.voltage,
+        sine: a.sine.as_deref(),
+        levels: a.levels.as_deref(),
+        prbs: a.prbs.as_deref(),
+        step_at: a.step_at,
+        duration: a.duration,
+    })?;
     let effects = settings::effects(&a.effects)?;
     let trace = trace(&motor, effects, &input, a.solver, a.duration, a.rate)?;
     let measurement = settings::measurement(&a.measurement, &trace)?;
