@@ -129,9 +129,22 @@ pub struct IdentifyArgs {
     /// (J, f, Ts and a load offset from current and position, any motion, open or closed loop).
     #[arg(long, value_enum, default_value = "voltage")]
     pub input: DriveArg,
-    /// The record of a current-driven axis (with --input current).
-    #[arg(long, value_name = "FILE.csv")]
-    pub record: Option<PathBuf>,
+    /// Records of any voltage waveform (staircase, PRBS, sine, reversals; repeatable): all six
+    /// parameters by simulating each record (output error). With --input current: the one
+    /// record of a current-driven axis.
+    #[arg(long, value_name = "FILE.csv", conflicts_with_all = ["high", "low", "steady"])]
+    pub record: Vec<PathBuf>,
+    /// Start of the --record fit: `paper` or FILE.json (default: estimated from the records by
+    /// equation error).
+    #[arg(long, value_name = "paper|FILE.json")]
+    pub start: Option<String>,
+    /// Write figures (SVG): measured and model for each channel of each record, residuals
+    /// beneath; the apparent-resistance law for --steady.
+    #[arg(long, value_name = "DIR")]
+    pub plot: Option<PathBuf>,
+    /// No progress messages or warnings on standard error (errors are still reported).
+    #[arg(long, short = 'q')]
+    pub quiet: bool,
     /// Column names of a file from another tool: t=HEADER,current=HEADER,position=HEADER,...
     #[arg(long, value_name = "NAME=HEADER,...")]
     pub columns: Option<String>,
@@ -190,11 +203,7 @@ pub struct SimulateArgs {
     #[command(flatten)]
     pub motor: MotorArg,
     /// Step voltage [V] (either sign).
-    #[arg(
-        long,
-        value_name = "VOLTS",
-        allow_hyphen_values = true
-    )]
+    #[arg(long, value_name = "VOLTS", allow_hyphen_values = true)]
     pub voltage: Option<f64>,
     /// Sine input AMP,FREQ: amplitude [V] and frequency [Hz] (Appendix D: 0.1,0.05).
     #[arg(long, value_name = "AMP,FREQ", allow_hyphen_values = true)]

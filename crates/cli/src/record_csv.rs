@@ -2,7 +2,7 @@
 //! and line, and writing them atomically.
 
 use std::fs::File;
-use std::io::Write;
+use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
@@ -52,14 +52,146 @@ impl ColumnMap {
     }
 }
 
+/// Other names accepted for each record column (case-insensitive).
+const ALIASES: [(&str, &[&str]); 5] = [
+    ("t", &["time", "time_s", "t_s", "seconds"]),
+    (
+        "voltage",
+        &["v", "u", "e", "volt", "volts", "armature_voltage"],
+    ),
+    ("current", &["i", "ia", "amps", "armature_current"]),
+    ("speed", &["w", "omega", "velocity", "vel", "tach", "tacho"]),
+    ("position", &["theta", "angle", "pos", "q", "encoder"]),
+];
+
+/// Units a header may state in brackets, `speed[rpm]`, and their factor to SI.
+fn unit_factor(column: &str, unit: &str) -> Option<f64> {
+    use std::f64::consts::PI;
+    let u = unit.trim();
+    Some(match (column, u) {
+        ("t", "s") => 1.0,
+        ("t", "ms") => 1e-3,
+        ("t", "us" | "µs") => 1e-6,
+        ("voltage", "V") => 1.0,
+        ("voltage", "mV") => 1e-3,
+        ("current", "A") => 1.0,
+        ("current", "mA") => 1e-3,
+        ("speed", "rad/s") => 1.0,
+        ("speed", "rpm" | "RPM" | "r/min") => 2.0 * PI / 60.0,
+        ("speed", "deg/s") => PI / 180.0,
+        ("speed", "rev/s" | "rps") => 2.0 * PI,
+        ("speed", "m/s") => 1.0,
+        ("speed", "mm/s") => 1e-3,
+        ("position", "rad") => 1.0,
+        ("position", "deg") => PI / 180.0,
+        ("position", "rev") => 2.0 * PI,
+        ("position", "m") => 1.0,
+        ("position", "mm") => 1e-3,
+        _ => return None,
+    })
+}
+
+/// The units `unit_factor` knows for a column, for error messages.
+fn known_units(column: &str) -> &'static str {
+    match column {
+        "t" => "s, ms, us",
+        "voltage" => "V, mV",
+        "current" => "A, mA",
+        "speed" => "rad/s, rpm, deg/s, rev/s (m/s, mm/s for a linear axis)",
+        _ => "rad, deg, rev (m, mm for a linear axis)",
+    }
+}
+
+/// Which record column a header name (unit stripped) stands for, by name or alias.
+fn canonical(name: &str) -> Option<&'static str> {
+    let lower = name.to_ascii_lowercase();
+    ALIASES
+        .iter()
+        .find(|(c, aliases)| *c == lower || aliases.contains(&lower.as_str()))
+        .map(|(c, _)| *c)
+}
+
+/// Splits `name[unit]` or `name (unit)` into the name and the unit.
+fn split_unit(header: &str) -> (String, Option<String>) {
+    let h = header.trim();
+    for (open, close) in [('[', ']'), ('(', ')')] {
+        if let (Some(a), true) = (h.find(open), h.ends_with(close)) {
+            let name = h[..a].trim().to_string();
+            let unit = h[a + open.len_utf8()..h.len() - close.len_utf8()].trim();
+            return (name, Some(unit.to_string()));
+        }
+    }
+    (h.to_string(), None)
+}
+
+/// A record read from a file, with what the reader found out about it.
+#[derive(Debug, Clone, Default)]
+pub struct Loaded {
+    /// The record in SI units (`clipped` counts the samples at a rail per channel).
+    pub record: Record,
+    /// 1-based line number of each sample.
+    pub lines: Vec<usize>,
+    /// Samples of voltage, current and speed at an ADC rail.
+    pub clipped: [Vec<bool>; 3],
+}
+
+impl Loaded {
+    /// `"lines a–b"` for samples `from..to` of the record.
+    pub fn line_span(&self, from: usize, to: usize) -> String {
+        let a = self.lines.get(from).copied().unwrap_or(0);
+        let b = self.lines.get(to.saturating_sub(1)).copied().unwrap_or(a);
+        if a == b {
+            format!("line {a}")
+        } else {
+            format!("lines {a}–{b}")
+        }
+    }
+
+    /// One line per clipped channel: how many samples, where, at which value.
+    pub fn clipping_report(&self) -> Vec<String> {
+        let names = ["voltage", "current", "speed"];
+        let columns = [
+            Some(&self.record.voltage),
+            Some(&self.record.current),
+            self.record.speed.as_ref(),
+        ];
+        let mut out = Vec::new();
+        for (c, mask) in self.clipped.iter().enumerate() {
+            let count = mask.iter().filter(|&&m| m).count();
+            if count == 0 {
+                continue;
+            }
+            let first = mask.iter().position(|&m| m).unwrap_or(0);
+            let last = mask.iter().rposition(|&m| m).unwrap_or(first);
+            let value = columns[c]
+                .and_then(|col| col.get(first))
+                .copied()
+                .unwrap_or(f64::NAN);
+            out.push(format!(
+                "{count} {} samples ({:.1} %) sit on an ADC rail at {value} ({} to {})",
+                names[c],
+                100.0 * count as f64 / mask.len().max(1) as f64,
+                self.line_span(first, first + 1),
+                self.line_span(last, last + 1),
+            ));
+        }
+        out
+    }
+}
+
 /// Reads a record file. Every problem is a [`BadInput`] naming the file, the line and the value.
 pub fn read_file(path: &Path) -> Result<Record> {
-    read_mapped(path, &ColumnMap::default(), true)
+    Ok(read_loaded(path, &ColumnMap::default(), true)?.record)
 }
 
 /// Reads a record file whose columns `map` names; `voltage` may be absent when
 /// `need_voltage` is false (a current-driven axis). With a map, unmapped columns are ignored.
 pub fn read_mapped(path: &Path, map: &ColumnMap, need_voltage: bool) -> Result<Record> {
+    Ok(read_loaded(path, map, need_voltage)?.record)
+}
+
+/// Reads a record file with its line numbers and the samples found at an ADC rail.
+pub fn read_loaded(path: &Path, map: &ColumnMap, need_voltage: bool) -> Result<Loaded> {
     let table = read_table(path)?;
     to_record(&table, map, need_voltage)
         .map_err(|(line, msg)| BadInput(format!("{}:{line}: {msg}", path.display())).into())
@@ -68,58 +200,130 @@ pub fn read_mapped(path: &Path, map: &ColumnMap, need_voltage: bool) -> Result<R
 /// A CSV file's numeric columns by header name, with the line number of every row.
 #[derive(Debug, Clone, Default)]
 pub struct Table {
-    /// Header names, in file order.
+    /// Header names as written, without a bracketed unit, in file order.
     pub names: Vec<String>,
-    /// One vector per header name.
+    /// The unit each header states in brackets, if any.
+    pub units: Vec<Option<String>>,
+    /// One vector per header name, as written in the file (no unit conversion).
     pub columns: Vec<Vec<f64>>,
     /// 1-based line number of each row.
     pub lines: Vec<usize>,
     /// Line number of the header.
     pub header_line: usize,
+    /// `# key: value` lines before the header.
+    pub metadata: Vec<(String, String)>,
 }
 
 impl Table {
-    /// The column named `name`, if any.
+    /// The column named `name` (case-insensitive, unit ignored), if any.
     pub fn column(&self, name: &str) -> Option<&[f64]> {
-        self.names
+        self.index(name).map(|i| self.columns[i].as_slice())
+    }
+
+    fn index(&self, name: &str) -> Option<usize> {
+        self.names.iter().position(|n| n.eq_ignore_ascii_case(name))
+    }
+
+    /// The value of metadata `key`, if given.
+    pub fn meta(&self, key: &str) -> Option<&str> {
+        self.metadata
             .iter()
-            .position(|n| n == name)
-            .map(|i| self.columns[i].as_slice())
+            .find(|(k, _)| k.eq_ignore_ascii_case(key))
+            .map(|(_, v)| v.as_str())
     }
 }
 
-/// Parses CSV text: `#` lines and blank lines skipped, one header row, numeric fields;
-/// errors carry the 1-based line number.
-fn parse_table(text: &str) -> std::result::Result<Table, (usize, String)> {
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    let mut lines = text
-        .lines()
-        .enumerate()
-        .map(|(i, l)| (i + 1, l.trim_end_matches('\r')));
-    let (header_line, header) = lines
-        .by_ref()
-        .find(|(_, l)| !l.trim().is_empty() && !l.starts_with('#'))
-        .ok_or((
-            1,
-            "no header row: expected a line such as t,voltage,current,speed,position".to_string(),
-        ))?;
-    let names: Vec<String> = header.split(',').map(|n| n.trim().to_string()).collect();
-    for (i, name) in names.iter().enumerate() {
-        if names[..i].contains(name) {
-            return Err((
-                header_line,
-                format!("column `{name}` appears twice in the header"),
-            ));
+/// Longest line the reader accepts \[bytes\]: a CSV row of a record is far shorter.
+const MAX_LINE_BYTES: usize = 64 * 1024;
+
+/// Reads the next line of `reader` into `buf` (without the newline), never more than
+/// [`MAX_LINE_BYTES`]; `Ok(false)` at the end of the input.
+fn next_line(reader: &mut impl BufRead, buf: &mut Vec<u8>) -> std::io::Result<Option<bool>> {
+    buf.clear();
+    loop {
+        let chunk = reader.fill_buf()?;
+        if chunk.is_empty() {
+            return Ok(if buf.is_empty() { None } else { Some(false) });
+        }
+        let room = MAX_LINE_BYTES + 1 - buf.len();
+        let take = chunk.len().min(room);
+        match chunk[..take].iter().position(|&b| b == b'\n') {
+            Some(i) => {
+                buf.extend_from_slice(&chunk[..i]);
+                reader.consume(i + 1);
+                return Ok(Some(true));
+            }
+            None => {
+                buf.extend_from_slice(&chunk[..take]);
+                reader.consume(take);
+                if buf.len() > MAX_LINE_BYTES {
+                    return Ok(Some(false));
+                }
+            }
         }
     }
-    let mut table = Table {
-        columns: vec![Vec::new(); names.len()],
-        names,
-        lines: Vec::new(),
-        header_line,
-    };
-    for (line_no, line) in lines {
-        if line.trim().is_empty() || line.starts_with('#') {
+}
+
+/// Parses CSV from `reader`: `#` lines and blank lines skipped (`# key: value` kept as
+/// metadata), one header row, numeric fields; errors carry the 1-based line number. Stops at
+/// the first bad line, so a large file of garbage costs one line.
+fn parse_table(reader: &mut impl BufRead) -> std::result::Result<Table, (usize, String)> {
+    let mut buf = Vec::new();
+    let mut line_no = 0usize;
+    let mut table = Table::default();
+    let mut saw_newline = true;
+    loop {
+        let ended =
+            next_line(reader, &mut buf).map_err(|e| (line_no + 1, format!("read error ({e})")))?;
+        let Some(newline) = ended else { break };
+        line_no += 1;
+        if buf.len() > MAX_LINE_BYTES {
+            return Err((
+                line_no,
+                format!(
+                    "longer than {} KiB without a line break: not a CSV record",
+                    MAX_LINE_BYTES / 1024
+                ),
+            ));
+        }
+        if let Some(i) = buf.iter().position(|&b| b == 0) {
+            return Err((
+                line_no,
+                format!(
+                    "NUL byte at column {}: binary data, not a CSV record",
+                    i + 1
+                ),
+            ));
+        }
+        let mut text = std::str::from_utf8(&buf).map_err(|e| {
+            (
+                line_no,
+                format!(
+                    "not UTF-8 text (invalid byte at column {}): is this a CSV file?",
+                    e.valid_up_to() + 1
+                ),
+            )
+        })?;
+        if line_no == 1 {
+            text = text.strip_prefix('\u{feff}').unwrap_or(text);
+        }
+        let line = text.trim_end_matches('\r');
+        saw_newline = newline;
+        if line.trim().is_empty() {
+            continue;
+        }
+        if let Some(comment) = line.strip_prefix('#') {
+            if table.names.is_empty() {
+                if let Some((k, v)) = comment.split_once(':') {
+                    table
+                        .metadata
+                        .push((k.trim().to_string(), v.trim().to_string()));
+                }
+            }
+            continue;
+        }
+        if table.names.is_empty() {
+            parse_header(&mut table, line, line_no)?;
             continue;
         }
         let fields: Vec<&str> = line.split(',').collect();
@@ -151,41 +355,157 @@ fn parse_table(text: &str) -> std::result::Result<Table, (usize, String)> {
         }
         table.lines.push(line_no);
     }
+    if table.names.is_empty() {
+        return Err((
+            line_no.max(1),
+            "no header row (empty file?): expected a line such as t,voltage,current,speed,position"
+                .to_string(),
+        ));
+    }
+    if !saw_newline && table.lines.last() == Some(&line_no) && table.lines.len() > 1 {
+        // The last row has no line break: a file cut while being written may have lost digits.
+        return Err((line_no, "the last line has no line break: the file may have been cut while being written (remove the line if it is complete)".into()));
+    }
     if table.lines.is_empty() {
-        return Err((header_line, "no data rows after the header".into()));
+        return Err((table.header_line, "no data rows after the header".into()));
     }
     Ok(table)
+}
+
+/// Reads the header row into `table`.
+fn parse_header(
+    table: &mut Table,
+    line: &str,
+    line_no: usize,
+) -> std::result::Result<(), (usize, String)> {
+    if !line.contains(',') {
+        for (sep, name) in [(';', "semicolons"), ('\t', "tabs"), ('|', "bars")] {
+            if line.contains(sep) {
+                return Err((line_no, format!("the header is separated by {name}: records are comma-separated (e.g. tr '{}' ',' < in > out)", if sep == '\t' { "\\t".to_string() } else { sep.to_string() })));
+            }
+        }
+    }
+    table.header_line = line_no;
+    for raw in line.split(',') {
+        let (name, unit) = split_unit(raw);
+        if name.is_empty() {
+            return Err((
+                line_no,
+                format!("an empty column name in the header `{line}`"),
+            ));
+        }
+        if name.parse::<f64>().is_ok() {
+            return Err((line_no, format!("the first row `{line}` is numbers, not a header: add a header such as t,voltage,current,speed")));
+        }
+        let clash = table.names.iter().position(|n| {
+            n.eq_ignore_ascii_case(&name)
+                || canonical(n).is_some_and(|c| Some(c) == canonical(&name))
+        });
+        if let Some(j) = clash {
+            return Err((
+                line_no,
+                format!(
+                    "columns `{}` and `{}` both give {}: keep one",
+                    table.names[j],
+                    name,
+                    canonical(&name).unwrap_or(&name)
+                ),
+            ));
+        }
+        table.names.push(name);
+        table.units.push(unit);
+        table.columns.push(Vec::new());
+    }
+    Ok(())
 }
 
 /// Reads a CSV file as a [`Table`]; every problem is a [`BadInput`] naming file and line.
 pub fn read_table(path: &Path) -> Result<Table> {
     let shown = path.display();
-    let bytes = std::fs::read(path).map_err(|e| BadInput(format!("{shown}: cannot read ({e})")))?;
-    let text = String::from_utf8(bytes).map_err(|e| {
-        BadInput(format!(
-            "{shown}: not UTF-8 text (invalid byte at offset {}): is this a CSV file?",
-            e.utf8_error().valid_up_to()
-        ))
-    })?;
-    parse_table(&text).map_err(|(line, msg)| BadInput(format!("{shown}:{line}: {msg}")).into())
+    let file = File::open(path).map_err(|e| BadInput(format!("{shown}: cannot read ({e})")))?;
+    if file.metadata().is_ok_and(|m| m.is_dir()) {
+        return Err(BadInput(format!("{shown}: a directory, not a record file")).into());
+    }
+    let mut reader = std::io::BufReader::with_capacity(1 << 16, file);
+    parse_table(&mut reader)
+        .map_err(|(line, msg)| BadInput(format!("{shown}:{line}: {msg}")).into())
 }
 
-/// Maps a table's columns to a record (SPEC section 4): `t` strictly increasing, `current`
-/// required, `voltage` required when `need_voltage`.
+/// Parses CSV bytes as a [`Table`] (the reader behind [`read_table`]); errors are `(line, message)`.
+#[cfg(test)]
+fn parse_bytes(bytes: &[u8]) -> std::result::Result<Table, (usize, String)> {
+    parse_table(&mut &bytes[..])
+}
+
+/// The conditioning ranges `[lo, hi]` of voltage, current and speed stated in the metadata, with
+/// half an ADC step as tolerance: `# measurement:` as `motorid simulate` writes it, or
+/// `# range_voltage: LO,HI` (likewise `range_current`, `range_speed`).
+fn metadata_rails(table: &Table) -> [Option<([f64; 2], f64)>; 3] {
+    let mut out = [None; 3];
+    if let Some(m) = table
+        .meta("measurement")
+        .and_then(|text| serde_json::from_str::<motor_model::MeasurementModel>(text).ok())
+    {
+        if let Some(adc) = m.adc {
+            for (c, range) in m.ranges.iter().enumerate() {
+                if let Some(r) = range {
+                    out[c] = Some(([r.lo, r.hi], 0.5 * adc.lsb(*r)));
+                }
+            }
+        }
+    }
+    for (c, key) in ["range_voltage", "range_current", "range_speed"]
+        .iter()
+        .enumerate()
+    {
+        if let Some(text) = table.meta(key) {
+            if let Ok((lo, hi)) = crate::settings::pair(key, text) {
+                out[c] = Some(([lo, hi], 1e-9 * (hi - lo).abs()));
+            }
+        }
+    }
+    out
+}
+
+/// Maps a table's columns to a record (SPEC section 4): names or aliases, units converted, `t`
+/// strictly increasing, `current` required, `voltage` required when `need_voltage`; finds the
+/// samples at an ADC rail.
 fn to_record(
     table: &Table,
     map: &ColumnMap,
     need_voltage: bool,
-) -> std::result::Result<Record, (usize, String)> {
+) -> std::result::Result<Loaded, (usize, String)> {
     let header_line = table.header_line;
     if map.pairs.is_empty() {
-        if let Some(name) = table.names.iter().find(|n| !COLUMNS.contains(&n.as_str())) {
+        if let Some(name) = table.names.iter().find(|n| canonical(n).is_none()) {
             return Err((header_line, format!("unknown column `{name}`: expected t, voltage, current and optionally speed, position (or map a file's own names with --columns)")));
         }
     }
-    let get = |name: &str| table.column(map.header(name)).map(<[f64]>::to_vec);
+    let find = |name: &str| -> Option<usize> {
+        match map.pairs.iter().find(|(n, _)| n == name) {
+            Some((_, header)) => table.index(&split_unit(header).0),
+            None => table.names.iter().position(|n| canonical(n) == Some(name)),
+        }
+    };
+    let get = |name: &str| -> std::result::Result<Option<Vec<f64>>, (usize, String)> {
+        let Some(i) = find(name) else { return Ok(None) };
+        let factor = match &table.units[i] {
+            None => 1.0,
+            Some(unit) => unit_factor(name, unit).ok_or_else(|| {
+                (
+                    header_line,
+                    format!(
+                        "column `{}[{unit}]`: unknown unit `{unit}` for {name}; known: {}",
+                        table.names[i],
+                        known_units(name)
+                    ),
+                )
+            })?,
+        };
+        Ok(Some(table.columns[i].iter().map(|v| v * factor).collect()))
+    };
     let required = |name: &str| {
-        get(name).ok_or((
+        get(name)?.ok_or((
             header_line,
             format!(
                 "no `{}` column in the header `{}`: a record needs t, current{} (map other names with --columns)",
@@ -198,20 +518,62 @@ fn to_record(
     let t = required("t")?;
     for (i, w) in t.windows(2).enumerate() {
         if w[1] <= w[0] {
-            return Err((table.lines[i + 1], format!("t = {} s does not come after the previous t = {} s: time must increase strictly", w[1], w[0])));
+            let what = if w[1] == w[0] {
+                "repeats"
+            } else {
+                "goes back to"
+            };
+            return Err((
+                table.lines[i + 1],
+                format!(
+                    "t {what} {} s after t = {} s on the line before: time must increase strictly",
+                    w[1], w[0]
+                ),
+            ));
         }
     }
-    Ok(Record {
+    if t.len() < 2 {
+        return Err((
+            table.lines[0],
+            "a single data row: a record needs many samples".into(),
+        ));
+    }
+    let mut record = Record {
         current: required("current")?,
         voltage: if need_voltage {
             required("voltage")?
         } else {
-            get("voltage").unwrap_or_default()
+            get("voltage")?.unwrap_or_default()
         },
-        speed: get("speed"),
-        position: get("position"),
+        speed: get("speed")?,
+        position: get("position")?,
         t,
         clipped: [0; 3],
+    };
+    let rails = metadata_rails(table);
+    let masks: [Vec<bool>; 3] = std::array::from_fn(|c| {
+        // With a position column the fits take the speed from the encoder (no ADC), so a
+        // speed column beside it is not checked.
+        let col = match c {
+            0 => Some(&record.voltage),
+            1 => Some(&record.current),
+            _ => record.speed.as_ref().filter(|_| record.position.is_none()),
+        };
+        match col {
+            Some(y) if !y.is_empty() => {
+                let (r, tol) = rails[c].map_or((None, 0.0), |(r, tol)| (Some(r), tol));
+                fit::find_clipping(y, r, tol)
+            }
+            _ => Vec::new(),
+        }
+    });
+    for (c, m) in masks.iter().enumerate() {
+        record.clipped[c] = m.iter().filter(|&&x| x).count();
+    }
+    Ok(Loaded {
+        record,
+        lines: table.lines.clone(),
+        clipped: masks,
     })
 }
 
@@ -282,4 +644,102 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
         let _ = std::fs::remove_file(&tmp);
     }
     result.with_context(|| format!("cannot write {}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn record(text: &str) -> std::result::Result<Loaded, (usize, String)> {
+        let table = parse_bytes(text.as_bytes())?;
+        to_record(&table, &ColumnMap::default(), true)
+    }
+
+    #[test]
+    fn units_in_the_header_are_converted_to_si() {
+        let loaded = record(
+            "# a comment\nt[ms],voltage[mV],current[mA],speed[rpm],position[deg]\n0,0,0,0,0\n1,40000,1500,60,180\n2,40000,1500,60,360\n",
+        )
+        .unwrap();
+        let r = loaded.record;
+        assert_eq!(r.t, [0.0, 1e-3, 2e-3]);
+        assert_eq!(r.voltage[1], 40.0);
+        assert_eq!(r.current[1], 1.5);
+        assert!((r.speed.unwrap()[1] - std::f64::consts::TAU).abs() < 1e-12);
+        assert!((r.position.unwrap()[2] - std::f64::consts::TAU).abs() < 1e-12);
+        assert_eq!(loaded.lines, [3, 4, 5]);
+    }
+
+    #[test]
+    fn aliases_name_the_columns_and_clashes_are_refused() {
+        let r = record("Time,U,I,Omega\n0,1,2,3\n1,1,2,3\n").unwrap().record;
+        assert_eq!((r.t[1], r.voltage[0], r.current[0]), (1.0, 1.0, 2.0));
+        assert_eq!(r.speed.unwrap()[0], 3.0);
+        let e = record("t,time,voltage,current\n0,0,1,2\n").unwrap_err();
+        assert_eq!(e.0, 1);
+        assert!(e.1.contains("both give t"), "{}", e.1);
+        let e = record("t,voltage,current[furlong]\n0,1,2\n1,1,2\n").unwrap_err();
+        assert!(
+            e.1.contains("unknown unit `furlong` for current"),
+            "{}",
+            e.1
+        );
+    }
+
+    #[test]
+    fn metadata_rails_mark_clipped_samples() {
+        let mut text = String::from("# range_current: -10,10\nt,voltage,current\n");
+        for i in 0..100 {
+            let c = if (40..50).contains(&i) { 10.0 } else { 1.0 };
+            text.push_str(&format!("{},{},{}\n", i, 5, c));
+        }
+        let loaded = record(&text).unwrap();
+        assert_eq!(loaded.record.clipped, [0, 10, 0]);
+        let report = loaded.clipping_report();
+        assert!(report[0].contains("10 current samples"), "{report:?}");
+        assert!(report[0].contains("line 43"), "{report:?}");
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(2000))]
+        /// The reader never panics, whatever the bytes: it returns a table or a line-numbered
+        /// error.
+        #[test]
+        fn random_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..600)) {
+            if let Ok(table) = parse_bytes(&bytes) {
+                let _ = to_record(&table, &ColumnMap::default(), true);
+            } else if let Err((line, msg)) = parse_bytes(&bytes) {
+                prop_assert!(line >= 1);
+                prop_assert!(!msg.is_empty() && !msg.contains('\n'));
+            }
+        }
+
+        /// Nor does text that looks almost like a record.
+        #[test]
+        fn near_records_never_panic(
+            rows in proptest::collection::vec(
+                proptest::collection::vec(
+                    prop_oneof![
+                        Just("0".to_string()), Just("1e3".to_string()), Just("-".to_string()),
+                        Just("NaN".to_string()), Just("inf".to_string()), Just("".to_string()),
+                        Just("t".to_string()), Just("current[mA]".to_string()), Just("#".to_string()),
+                        "[0-9.eE+-]{1,8}",
+                    ],
+                    0..6,
+                ),
+                0..12,
+            ),
+            crlf in any::<bool>(),
+        ) {
+            let sep = if crlf { "\r\n" } else { "\n" };
+            let text: String = std::iter::once("t,voltage,current".to_string())
+                .chain(rows.iter().map(|r| r.join(",")))
+                .collect::<Vec<_>>()
+                .join(sep);
+            if let Ok(table) = parse_bytes(text.as_bytes()) {
+                let _ = to_record(&table, &ColumnMap::default(), true);
+            }
+        }
+    }
 }

@@ -218,7 +218,7 @@ fn bad_input_gives_one_line_errors_and_exit_code_2() {
             vec!["model", "--motor", "/no/such/motor.json"],
             "cannot read the file",
         ),
-        (vec!["simulate", "--duration", "1"], "give the input"),
+        (vec!["simulate", "--duration", "1"], "give one input"),
         (
             vec!["simulate", "--voltage", "1", "--duration", "-1"],
             "duration = -1",
@@ -617,7 +617,7 @@ fn current_driven_input_errors_name_what_is_missing() {
                 "--torque-constant",
                 "2",
             ],
-            "unknown column `time_s`",
+            "unknown column `vir`",
         ),
         (
             vec![

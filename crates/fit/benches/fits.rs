@@ -57,6 +57,8 @@ fn test_of(r: &Rec) -> StepTest<'_> {
         current: &r.current,
         speed: Some(&r.speed),
         position: r.position.as_deref(),
+        exclude_current: None,
+        exclude_speed: None,
     }
 }
 

@@ -58,6 +58,23 @@ pub fn check_step_test(label: &str, t: &StepTest<'_>) -> Result<(), FitError> {
             ));
         }
     }
+    for (name, mask) in [("current", t.exclude_current), ("speed", t.exclude_speed)] {
+        if let Some(m) = mask {
+            if m.len() != n {
+                return Err(bad(
+                    label,
+                    format!(
+                        "the {name} exclusion mask has {} samples where the current has {n}",
+                        m.len()
+                    ),
+                ));
+            }
+            let kept = m.iter().filter(|&&x| !x).count();
+            if kept < MIN_SAMPLES {
+                return Err(bad(label, format!("only {kept} {name} samples are left once the clipped ones are excluded: widen the ADC range")));
+            }
+        }
+    }
     let span = |y: &[f64]| {
         y.iter().fold(f64::NEG_INFINITY, |m, &v| m.max(v))
             - y.iter().fold(f64::INFINITY, |m, &v| m.min(v))

@@ -36,6 +36,10 @@ pub struct StepTest<'a> {
     /// Encoder angle \[rad\] (any offset), if measured. Fitted through its central difference,
     /// with the same difference applied to the model's angle ([`Channel::EncoderSpeed`]).
     pub position: Option<&'a [f64]>,
+    /// Samples of the current to leave out of the fit (clipped at an ADC rail), if any.
+    pub exclude_current: Option<&'a [bool]>,
+    /// Samples of the speed (or encoder speed) to leave out of the fit, if any.
+    pub exclude_speed: Option<&'a [bool]>,
 }
 
 /// The fitted channels.
@@ -134,6 +138,47 @@ struct ChannelData {
     kind: Channel,
     data: Vec<f64>,
     sigma: f64,
+    /// Samples left out of the fit (`true`), if any.
+    exclude: Option<Vec<bool>>,
+}
+
+impl ChannelData {
+    fn new(kind: Channel, data: Vec<f64>, exclude: Option<&[bool]>) -> Self {
+        let exclude = exclude
+            .filter(|m| m.iter().any(|&x| x))
+            .map(<[bool]>::to_vec);
+        let kept: Vec<f64> = match &exclude {
+            Some(m) => data
+                .iter()
+                .zip(m)
+                .filter(|(_, &x)| !x)
+                .map(|(v, _)| *v)
+                .collect(),
+            None => Vec::new(),
+        };
+        let sigma = noise_std(if exclude.is_some() { &kept } else { &data });
+        ChannelData {
+            kind,
+            data,
+            sigma,
+            exclude,
+        }
+    }
+
+    /// The measured value at sample `i`, unless it is left out.
+    fn value(&self, i: usize) -> Option<f64> {
+        if self.exclude.as_ref().is_some_and(|m| m[i]) {
+            return None;
+        }
+        self.data.get(i).copied()
+    }
+
+    /// Samples fitted.
+    fn fitted(&self) -> usize {
+        self.exclude
+            .as_ref()
+            .map_or(self.data.len(), |m| m.iter().filter(|&&x| !x).count())
+    }
 }
 
 struct Weighted {
@@ -187,7 +232,7 @@ impl FullProblem {
                  visit: &mut dyn FnMut(usize, usize, usize, T, f64, f64)| {
                     for (c, ch) in w.channels.iter().enumerate() {
                         if ch.kind == Channel::EncoderSpeed {
-                            if let Some(&y) = ch.data.get(i) {
+                            if let Some(y) = ch.value(i) {
                                 visit(k, c, i, difference_at(window, i, n, w.dt), y, ch.sigma);
                             }
                         }
@@ -200,7 +245,7 @@ impl FullProblem {
                         Channel::Speed => s.speed_rad_s,
                         Channel::EncoderSpeed => continue,
                     };
-                    if let Some(&y) = ch.data.get(i) {
+                    if let Some(y) = ch.value(i) {
                         visit(k, c, i, model, y, ch.sigma);
                     }
                 }
@@ -314,33 +359,31 @@ pub fn identify_full(
     for (k, t) in tests.iter().enumerate() {
         crate::checks::check_step_test(&format!("test {}", k + 1), t)?;
         let n = t.current.len();
-        let mut channels = Vec::new();
-        channels.push(ChannelData {
-            kind: Channel::Current,
-            data: t.current.to_vec(),
-            sigma: noise_std(t.current),
-        });
+        let mut channels = vec![ChannelData::new(
+            Channel::Current,
+            t.current.to_vec(),
+            t.exclude_current,
+        )];
         match (t.position, t.speed) {
             (Some(angle), _) => {
                 let times: Vec<f64> = (0..n).map(|i| t.t_first + i as f64 * t.dt).collect();
                 let data = motor_model::central_difference(&times, angle);
-                let sigma = noise_std(&data);
-                channels.push(ChannelData {
-                    kind: Channel::EncoderSpeed,
+                channels.push(ChannelData::new(
+                    Channel::EncoderSpeed,
                     data,
-                    sigma,
-                });
+                    t.exclude_speed,
+                ));
             }
             (None, Some(speed)) => {
-                channels.push(ChannelData {
-                    kind: Channel::Speed,
-                    data: speed.to_vec(),
-                    sigma: noise_std(speed),
-                });
+                channels.push(ChannelData::new(
+                    Channel::Speed,
+                    speed.to_vec(),
+                    t.exclude_speed,
+                ));
             }
             (None, None) => {}
         }
-        n_residuals += n * channels.len();
+        n_residuals += channels.iter().map(ChannelData::fitted).sum::<usize>();
         weighted.push(Weighted {
             volts: t.volts,
             t_first: t.t_first,
@@ -465,7 +508,10 @@ fn channel_quality(problem: &FullProblem, values: [f64; 6]) -> Vec<ChannelQualit
         .map(|w| {
             w.channels
                 .iter()
-                .map(|c| c.data.iter().sum::<f64>() / c.data.len().max(1) as f64)
+                .map(|c| {
+                    (0..c.data.len()).filter_map(|i| c.value(i)).sum::<f64>()
+                        / c.fitted().max(1) as f64
+                })
                 .collect()
         })
         .collect();
@@ -484,7 +530,7 @@ fn channel_quality(problem: &FullProblem, values: [f64; 6]) -> Vec<ChannelQualit
                 ch.sigma,
                 sse,
                 sst,
-                ch.data.len(),
+                ch.fitted(),
             ));
         }
     }

@@ -25,6 +25,7 @@
 #![warn(missing_docs)]
 
 mod checks;
+mod clipping;
 mod error;
 mod full_model;
 mod lm;
@@ -39,6 +40,7 @@ mod steady_fit;
 mod step_location;
 
 pub use checks::{check_settled, check_step_test, MIN_SAMPLES, SETTLED_FRACTION};
+pub use clipping::{find_clipping, MIN_CLIPPED_RUN};
 pub use error::FitError;
 pub use full_model::{
     identify_full, noise_std, Channel, ChannelQuality, FullFit, StepTest, PARAM_NAMES, PARAM_UNITS,

@@ -28,6 +28,8 @@ fn test_of(r: &Rec) -> StepTest<'_> {
         current: &r.current,
         speed: Some(&r.speed),
         position: None,
+        exclude_current: None,
+        exclude_speed: None,
     }
 }
 

@@ -192,6 +192,8 @@ fn speed_check_c8_gives_omega_n_and_zeta() {
             current: &current,
             speed: Some(&speed),
             position: None,
+            exclude_current: None,
+            exclude_speed: None,
         };
         let check = fit::speed_check_c8(&test, t0, table_3_fit(), LmSettings::default()).unwrap();
         assert!(check.termination.converged());

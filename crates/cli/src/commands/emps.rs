@@ -155,9 +155,8 @@ pub fn run(a: &EmpsArgs) -> Result<()> {
             |q: &[f64]| -> Vec<f64> { qm.iter().zip(q).map(|(m, s)| 1e3 * (m - s)).collect() };
         let (err_without, err_with) = (to_mm(&q_val), to_mm(&q_val_p));
         let pulse_force: Vec<f64> = pulses.iter().map(|p| DRIVE_GAIN_N_PER_V * p).collect();
-        let path = dir.join("emps_pulses.svg");
-        plot::time_series_svg(
-            &path,
+        let written = plot::time_series(
+            &dir.join("emps_pulses"),
             "EMPS validation record: measured minus simulated position",
             t_val,
             &[
@@ -187,7 +186,9 @@ pub fn run(a: &EmpsArgs) -> Result<()> {
             ],
         )?;
         if !a.json {
-            println!("wrote {}", path.display());
+            for path in written {
+                println!("wrote {}", path.display());
+            }
         }
     }
     if a.json {

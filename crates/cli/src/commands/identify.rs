@@ -4,15 +4,16 @@ use std::path::Path;
 
 use anyhow::Result;
 use fit::{
-    fit_apparent_resistance, identify_full, identify_inverse_model, identify_paper, locate_step,
-    steady_state_start, FullFit, InverseModelSettings, LmSettings, PaperIdentification, StepTest,
+    equation_error_start, fit_apparent_resistance, identify_full, identify_inverse_model,
+    identify_output_error, identify_paper, locate_step, steady_state_start, voltage_input,
+    ExcitedRecord, FullFit, InverseModelSettings, LmSettings, PaperIdentification, StepTest,
     MECHANICAL_NAMES, PARAM_NAMES, PARAM_UNITS,
 };
-use motor_model::{central_difference, Derived, Record};
+use motor_model::{central_difference, Derived, Input, Record};
 use serde_json::{json, Value};
 
 use crate::args::{AxisArg, DriveArg, IdentifyArgs, MethodArg};
-use crate::record_csv::{read_file, read_mapped, ColumnMap};
+use crate::record_csv::{read_file, read_loaded, read_mapped, ColumnMap, Loaded};
 use crate::{BadInput, NotConverged};
 
 /// A 95 % interval wider than this fraction of the value marks a poorly determined parameter.
@@ -27,9 +28,16 @@ pub struct LoadedStep {
     current: Vec<f64>,
     speed: Option<Vec<f64>>,
     position: Option<Vec<f64>>,
+    exclude_current: Option<Vec<bool>>,
+    exclude_speed: Option<Vec<bool>>,
 }
 
 impl LoadedStep {
+    /// Whether any sample is left out as clipped.
+    pub fn has_clipping(&self) -> bool {
+        self.exclude_current.is_some() || self.exclude_speed.is_some()
+    }
+
     /// The identification's view of the record.
     pub fn test(&self) -> StepTest<'_> {
         StepTest {
@@ -39,13 +47,69 @@ impl LoadedStep {
             current: &self.current,
             speed: self.speed.as_deref(),
             position: self.position.as_deref(),
+            exclude_current: self.exclude_current.as_deref(),
+            exclude_speed: self.exclude_speed.as_deref(),
         }
     }
 }
 
-/// Reads `path`, finds the step and keeps the samples from it on.
-pub fn load_step(path: &Path) -> Result<LoadedStep> {
-    step_from_record(path.display().to_string(), read_file(path)?)
+/// Samples of current and speed to leave out, `None` where nothing is clipped.
+pub type ClipMasks = (Option<Vec<bool>>, Option<Vec<bool>>);
+
+/// Largest fraction of a channel that may sit on an ADC rail before the record is refused.
+const MAX_CLIPPED_FRACTION: f64 = 0.25;
+/// Largest fraction of the voltage that may be clipped: the fits take the voltage as known.
+const MAX_CLIPPED_VOLTAGE: f64 = 0.01;
+
+/// Refuses a record whose clipping hides too much, and warns (unless `quiet`) about the rest:
+/// those samples are left out of the fits. Returns the masks of current and speed, `None` where
+/// nothing is clipped.
+pub fn check_clipping(shown: &str, loaded: &Loaded, quiet: bool) -> Result<ClipMasks> {
+    let report = loaded.clipping_report();
+    let fraction = |m: &[bool]| m.iter().filter(|&&x| x).count() as f64 / m.len().max(1) as f64;
+    let limits = [
+        MAX_CLIPPED_VOLTAGE,
+        MAX_CLIPPED_FRACTION,
+        MAX_CLIPPED_FRACTION,
+    ];
+    let mut line = report.iter();
+    for (c, mask) in loaded.clipped.iter().enumerate() {
+        if mask.iter().any(|&x| x) {
+            let text = line.next().cloned().unwrap_or_default();
+            if fraction(mask) > limits[c] {
+                let what = if c == 0 {
+                    "the fits need the applied voltage"
+                } else {
+                    "too much of the record is lost"
+                };
+                return Err(BadInput(format!(
+                    "{shown}: {text}: {what}; record again with a wider range"
+                ))
+                .into());
+            }
+            if !quiet {
+                eprintln!("warning: {shown}: {text}; those samples are left out of the fit");
+            }
+        }
+    }
+    let mask = |m: &Vec<bool>| m.iter().any(|&x| x).then(|| m.clone());
+    Ok((mask(&loaded.clipped[1]), mask(&loaded.clipped[2])))
+}
+
+/// Reads `path`, finds the step and keeps the samples from it on; clipped samples are left out
+/// of the fits (and a record with too many is refused).
+pub fn load_step(path: &Path, quiet: bool) -> Result<LoadedStep> {
+    let shown = path.display().to_string();
+    let loaded = read_loaded(path, &ColumnMap::default(), true)?;
+    let (exclude_current, exclude_speed) = check_clipping(&shown, &loaded, quiet)?;
+    let mut step = step_from_record(shown, loaded.record)?;
+    let from = loaded.lines.len() - step.current.len();
+    step.exclude_current = exclude_current.map(|m| m[from..].to_vec());
+    // The encoder speed has no ADC: only a tachometer column can be clipped.
+    if step.position.is_none() {
+        step.exclude_speed = exclude_speed.map(|m| m[from..].to_vec());
+    }
+    Ok(step)
 }
 
 /// Finds the step in a record (named `shown` in errors) and keeps the samples from it on. Speed
@@ -66,6 +130,8 @@ pub fn step_from_record(shown: String, cols: Record) -> Result<LoadedStep> {
         current: cols.current[from..].to_vec(),
         speed,
         position: cols.position.as_ref().map(|p| p[from..].to_vec()),
+        exclude_current: None,
+        exclude_speed: None,
     })
 }
 
@@ -103,10 +169,10 @@ fn paper_json(paper: &PaperIdentification) -> Value {
 
 /// The JSON report: parameters with 95 % CIs and units, derived constants, fit quality.
 pub fn report_json(
-    method: MethodArg,
+    method: &str,
     paper: Result<&PaperIdentification, &str>,
     full: Option<&FullFit>,
-    files: [&str; 2],
+    files: &[&str],
 ) -> Value {
     let params = match (full, paper) {
         (Some(f), _) => f.params,
@@ -148,7 +214,7 @@ pub fn report_json(
         },
     };
     json!({
-        "method": match method { MethodArg::Paper => "paper", MethodArg::Full => "full" },
+        "method": method,
         "parameters": parameters,
         "derived": serde_json::to_value(Derived::new(&params)).unwrap_or(Value::Null),
         "quality": quality,
@@ -160,10 +226,10 @@ pub fn report_json(
 }
 
 fn print_table(
-    method: MethodArg,
+    method: &str,
     paper: Result<&PaperIdentification, &str>,
     full: Option<&FullFit>,
-    files: [&str; 2],
+    files: &[&str],
 ) {
     let params = match (full, paper) {
         (Some(f), _) => f.params,
@@ -172,8 +238,9 @@ fn print_table(
     };
     let v = params.values();
     match method {
-        MethodArg::Full => println!("full model: R, L, k, f, J, Ts fitted jointly to both records (exact response, breakaway included)"),
-        MethodArg::Paper => println!("paper method: fit of Eq. (33), then Eqs. (34)-(51) (the method gives no confidence intervals)"),
+        "full" => println!("full model: R, L, k, f, J, Ts fitted jointly to both records (exact response, breakaway included)"),
+        "paper" => println!("paper method: fit of Eq. (33), then Eqs. (34)-(51) (the method gives no confidence intervals)"),
+        _ => println!("output error: R, L, k, f, J, Ts fitted by simulating each record's own voltage (stick-slip model, Appendix D)"),
     }
     println!("      {:>12}   {:<27} unit", "value", "95% CI");
     let mut poorly = Vec::new();
@@ -238,7 +305,7 @@ fn print_table(
             Err(e) => println!("(C.8) speed check not made: {e}"),
         }
     }
-    if let (Err(why), Some(_)) = (paper, full) {
+    if let (Err(why), Some(_), "full") = (paper, full, method) {
         println!("note: the paper's method does not apply to these records ({why}); the full fit started from the steady states instead");
     }
     if !poorly.is_empty() {
@@ -294,17 +361,57 @@ fn run_steady(a: &IdentifyArgs) -> Result<()> {
         );
         println!("Ts = k b / a = {:.6} N·m  (Eq. (9))", fit.ts_nm);
     }
+    if let Some(dir) = &a.plot {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
+        let (lo, hi) = fit
+            .points
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(p.0), hi.max(p.0))
+            });
+        let curve: Vec<(f64, f64)> = (0..=200)
+            .map(|j| lo + (hi - lo) * f64::from(j) / 200.0)
+            .map(|ir| (ir, fit.a_ohm - fit.b_ohm_a / ir))
+            .collect();
+        let paths = crate::plot::xy(
+            &dir.join("apparent_resistance"),
+            &crate::plot::XyPlot {
+                title: "Apparent resistance, Eq. (8): dR = a - b/Ir",
+                x_label: "steady current Ir [A]",
+                y_label: "dR = E/Ir - R [ohm]",
+                points: ("tests", &fit.points),
+                curve: ("fitted law", &curve),
+            },
+        )?;
+        if !a.quiet {
+            for p in paths {
+                eprintln!("wrote {}", p.display());
+            }
+        }
+    }
     Ok(())
 }
 
 /// `--input current`: J, f, Ts and the offset of a current-driven axis by inverse-model least
 /// squares (the EMPS benchmark's IDIM-LS).
 fn run_current(a: &IdentifyArgs) -> Result<()> {
-    let path = a.record.as_ref().ok_or_else(|| {
-        BadInput(
-            "--input current needs --record FILE.csv (current and position of the axis)".into(),
-        )
-    })?;
+    let path = match a.record.as_slice() {
+        [one] => one,
+        [] => {
+            return Err(BadInput(
+                "--input current needs --record FILE.csv (current and position of the axis)".into(),
+            )
+            .into())
+        }
+        more => {
+            return Err(BadInput(format!(
+                "--input current identifies one record; {} were given",
+                more.len()
+            ))
+            .into())
+        }
+    };
     let k = a.torque_constant.ok_or_else(|| {
         BadInput("--input current needs --torque-constant K: the torque (force) per unit of the current column".into())
     })?;
@@ -397,18 +504,28 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
     if !a.steady.is_empty() {
         return run_steady(a);
     }
+    if !a.record.is_empty() {
+        return run_records(a);
+    }
     let (Some(high), Some(low)) = (&a.high, &a.low) else {
         return Err(BadInput(
             "give --high HV.csv --low LV.csv (step records), or --steady FILE.csv ...".into(),
         )
         .into());
     };
-    let (hv, lv) = (load_step(high)?, load_step(low)?);
+    let (hv, lv) = (load_step(high, a.quiet)?, load_step(low, a.quiet)?);
     let files = [hv.path.as_str(), lv.path.as_str()];
     let tests = [hv.test(), lv.test()];
     let settings = LmSettings::default();
     let both = format!("{} / {}", files[0], files[1]);
-    let paper = identify_paper(&tests[0], &tests[1], settings).map_err(|e| e.to_string());
+    let paper = if hv.has_clipping() || lv.has_clipping() {
+        Err(
+            "clipped samples: the paper's method reads the whole current and its steady values"
+                .to_string(),
+        )
+    } else {
+        identify_paper(&tests[0], &tests[1], settings).map_err(|e| e.to_string())
+    };
     let full = match (a.method, &paper) {
         (MethodArg::Paper, Err(e)) => return Err(BadInput(format!("{both}: {e}")).into()),
         (MethodArg::Paper, Ok(_)) => None,
@@ -425,15 +542,150 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
         }
     };
     let paper = paper.as_ref().map_err(String::as_str);
+    let method = match a.method {
+        MethodArg::Paper => "paper",
+        MethodArg::Full => "full",
+    };
     if a.json {
         println!(
             "{}",
-            serde_json::to_string_pretty(&report_json(a.method, paper, full.as_ref(), files))?
+            serde_json::to_string_pretty(&report_json(method, paper, full.as_ref(), &files))?
         );
     } else {
-        print_table(a.method, paper, full.as_ref(), files);
+        print_table(method, paper, full.as_ref(), &files);
     }
-    if let Some(f) = &full {
+    converged(full.as_ref())
+}
+
+/// A record of any excitation, read and checked: owns what [`ExcitedRecord`] borrows.
+pub struct LoadedExcited {
+    /// File it came from.
+    pub path: String,
+    /// The record (SI units).
+    pub record: Record,
+    /// The voltage waveform rebuilt from the voltage column, time from the first sample.
+    pub input: Input,
+    dt: f64,
+    exclude_current: Option<Vec<bool>>,
+    exclude_speed: Option<Vec<bool>>,
+}
+
+impl LoadedExcited {
+    /// The identification's view of the record.
+    pub fn excited(&self) -> ExcitedRecord<'_> {
+        ExcitedRecord {
+            input: &self.input,
+            dt: self.dt,
+            current: &self.record.current,
+            speed: self.record.speed.as_deref(),
+            position: self.record.position.as_deref(),
+            exclude_current: self.exclude_current.as_deref(),
+            exclude_speed: self.exclude_speed.as_deref(),
+        }
+    }
+}
+
+/// Reads a record of any voltage waveform for the output-error fit.
+pub fn load_excited(path: &Path, quiet: bool) -> Result<LoadedExcited> {
+    let shown = path.display().to_string();
+    let loaded = read_loaded(path, &ColumnMap::default(), true)?;
+    let (exclude_current, exclude_speed) = check_clipping(&shown, &loaded, quiet)?;
+    let rec = loaded.record;
+    if rec.speed.is_none() && rec.position.is_none() {
+        return Err(BadInput(format!(
+            "{shown}: neither speed nor position: k, f, J and Ts need one of them"
+        ))
+        .into());
+    }
+    let input =
+        voltage_input(&rec.t, &rec.voltage).map_err(|e| BadInput(format!("{shown}: {e}")))?;
+    if input.peak_volts() == 0.0 {
+        return Err(BadInput(format!(
+            "{shown}: the voltage is 0 V throughout ({}): nothing drives the motor",
+            loaded_span(&loaded.lines)
+        ))
+        .into());
+    }
+    let dt = (rec.t[rec.t.len() - 1] - rec.t[0]) / (rec.t.len() - 1) as f64;
+    Ok(LoadedExcited {
+        path: shown,
+        input,
+        dt,
+        exclude_current,
+        exclude_speed: if rec.position.is_some() {
+            None
+        } else {
+            exclude_speed
+        },
+        record: rec,
+    })
+}
+
+/// `lines a–b` of a whole record.
+fn loaded_span(lines: &[usize]) -> String {
+    format!(
+        "lines {}–{}",
+        lines.first().copied().unwrap_or(0),
+        lines.last().copied().unwrap_or(0)
+    )
+}
+
+/// `--record A.csv --record B.csv ...`: all six parameters by output error.
+fn run_records(a: &IdentifyArgs) -> Result<()> {
+    let loaded = a
+        .record
+        .iter()
+        .map(|p| load_excited(p, a.quiet))
+        .collect::<Result<Vec<_>>>()?;
+    let files: Vec<&str> = loaded.iter().map(|l| l.path.as_str()).collect();
+    let all = files.join(" / ");
+    let records: Vec<ExcitedRecord> = loaded.iter().map(LoadedExcited::excited).collect();
+    let start = match &a.start {
+        Some(spec) => crate::settings::motor(spec)?,
+        None => equation_error_start(&records)
+            .map_err(|e| BadInput(format!("{all}: {e} (give a start with --start FILE.json)")))?,
+    };
+    let samples: usize = loaded.iter().map(|l| l.record.t.len()).sum();
+    let clock = std::time::Instant::now();
+    if !a.quiet {
+        eprintln!(
+            "fitting {} record(s), {samples} samples, by simulation (about 7 simulations per iteration)…",
+            loaded.len()
+        );
+    }
+    let full = identify_output_error(&records, &start, LmSettings::default())
+        .map_err(|e| BadInput(format!("{all}: {e}")))?;
+    if !a.quiet {
+        eprintln!(
+            "done in {:.1} s ({} iterations)",
+            clock.elapsed().as_secs_f64(),
+            full.iterations
+        );
+    }
+    if a.json {
+        let mut report = report_json(
+            "output_error",
+            Err("the paper's method needs a high- and a low-voltage step (--high, --low)"),
+            Some(&full),
+            &files,
+        );
+        if let Some(obj) = report.as_object_mut() {
+            obj.remove("paper_method");
+            obj.insert("start".into(), serde_json::to_value(start)?);
+        }
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print_table("output_error", Err(""), Some(&full), &files);
+    }
+    if let Some(dir) = &a.plot {
+        crate::commands::figures::fit_figures(dir, &loaded, &full.params, a.quiet)?;
+    }
+    converged(Some(&full))
+}
+
+/// Exit status of a full fit: [`NotConverged`] with its residual when the solver gave up.
+fn converged(full: Option<&FullFit>) -> Result<()> {
+    if let Some(f) = full {
         if !f.termination.converged() {
             return Err(NotConverged(format!(
                 "the full fit did not converge ({} after {} iterations; weighted cost {:.3e})",

@@ -1,5 +1,6 @@
 pub mod demo;
 pub mod emps;
+pub mod figures;
 pub mod identify;
 pub mod model;
 pub mod montecarlo;
