@@ -432,15 +432,73 @@ pub fn identify_output_error(
     fit_weighted(&mut problem, start, settings)
 }
 
+/// Cut-offs tried by [`equation_error_start`], as fractions of the sample rate.
+const START_CUTOFFS: [f64; 4] = [0.1, 0.02, 0.004, 0.0008];
+
 /// A start for [`identify_output_error`] by equation error: the measured signals, low-passed
-/// forward and backward (zero phase, 4th-order Butterworth at a tenth of the sample rate; a
-/// fiftieth, with decimation by 5, for the angle), are
-/// put into the model's equations, which are linear in the parameters:
-/// Eq. (2a) `E = R I + L dI/dt + k Ω` gives R, L, k by least squares over every sample, and
-/// Eq. (2b) `k I = J dΩ/dt + f Ω + Ts sign Ω` the rest (the inverse model of
-/// [`crate::identify_inverse_model`] on the motor torque `k I`). Values the records cannot
+/// forward and backward (zero phase, 4th-order Butterworth), are put into the model's
+/// equations, which are linear in the parameters: Eq. (2a) `E = R I + L dI/dt + k Ω` gives R, L,
+/// k by least squares over every sample, and Eq. (2b) `k I = J dΩ/dt + f Ω + Ts sign Ω` the
+/// rest (the inverse model of [`crate::identify_inverse_model`] on the motor torque `k I`, the
+/// angle filtered five times harder). Derivatives of noisy signals bias such estimates towards
+/// zero unless the filter is narrow, and a narrow filter distorts fast motors: so the estimate
+/// is made at cut-offs of 1/10, 1/50, 1/250 and 1/1250 of the sample rate and the one whose
+/// simulation fits the records best (output-error cost) is returned. Values the records cannot
 /// resolve (an L below one sample, no friction seen) are replaced by small positive ones.
 pub fn equation_error_start(records: &[ExcitedRecord<'_>]) -> Result<MotorParams, FitError> {
+    let prepared = records
+        .iter()
+        .enumerate()
+        .map(|(k, r)| prepare(k, r))
+        .collect::<Result<Vec<_>, _>>()?;
+    let n_residuals = prepared
+        .iter()
+        .flat_map(|r| &r.channels)
+        .map(|c| c.data.len())
+        .sum();
+    let mut problem = OeProblem {
+        records: prepared,
+        n_residuals,
+        max_step_s: f64::INFINITY,
+    };
+    let mut best: Option<(f64, MotorParams)> = None;
+    let mut first_error = None;
+    for fraction in START_CUTOFFS {
+        match equation_error_estimate(records, fraction) {
+            Ok(start) => {
+                problem.max_step_s = Simulator::new(
+                    start,
+                    Effects::none(),
+                    Input::Step {
+                        volts: 1.0,
+                        at_s: 0.0,
+                    },
+                )
+                .map_or(f64::INFINITY, |s| s.max_step_s());
+                let theta: Vec<f64> = start.values().iter().map(|v| v.ln()).collect();
+                let cost = problem.cost(&theta).unwrap_or(f64::INFINITY);
+                if best.as_ref().is_none_or(|(c, _)| cost < *c) {
+                    best = Some((cost, start));
+                }
+            }
+            Err(e) => {
+                first_error.get_or_insert(e);
+            }
+        }
+    }
+    match (best, first_error) {
+        (Some((_, start)), _) => Ok(start),
+        (None, Some(e)) => Err(e),
+        (None, None) => Err(bad("records", "no start could be estimated".into())),
+    }
+}
+
+/// One equation-error estimate with the electrical signals low-passed at `fraction` of the
+/// sample rate (the angle at a fifth of that, with decimation by 5).
+fn equation_error_estimate(
+    records: &[ExcitedRecord<'_>],
+    fraction: f64,
+) -> Result<MotorParams, FitError> {
     let domain = |reason: String| FitError::MethodDomain {
         equation: "equation-error start (Eq. (2))",
         reason,
@@ -478,7 +536,7 @@ pub fn equation_error_start(records: &[ExcitedRecord<'_>]) -> Result<MotorParams
                 )))
             }
         };
-        let filter = Butterworth::low_pass(4, 0.1 / dt, 1.0 / dt)?;
+        let filter = Butterworth::low_pass(4, fraction / dt, 1.0 / dt)?;
         let i_f = filter.filtfilt(rec.current);
         let th_f = filter.filtfilt(&position);
         let w_f = central_difference(&times, &th_f);
@@ -512,10 +570,10 @@ pub fn equation_error_start(records: &[ExcitedRecord<'_>]) -> Result<MotorParams
     for (rec, (dt, position)) in records.iter().zip(&per_record) {
         let torque: Vec<f64> = rec.current.iter().map(|i| k * i).collect();
         // Accelerations are second differences of a quantised angle: filter harder than the
-        // electrical side (a fiftieth of the rate) and average by decimation, or the noise in
-        // the acceleration regressor biases J towards zero.
+        // electrical side and average by decimation, or the noise in the acceleration
+        // regressor biases J towards zero.
         let settings = InverseModelSettings {
-            position_cutoff_hz: 0.02 / dt,
+            position_cutoff_hz: 0.2 * fraction / dt,
             position_filter_order: 4,
             decimation: 5,
         };

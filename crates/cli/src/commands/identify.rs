@@ -23,6 +23,8 @@ const POORLY_DETERMINED: f64 = 0.1;
 pub struct LoadedStep {
     /// File it came from.
     pub path: String,
+    /// The file with the line span of its samples (`hv.csv:7-50007`), for errors.
+    pub label: String,
     volts: f64,
     dt: f64,
     current: Vec<f64>,
@@ -102,7 +104,9 @@ pub fn load_step(path: &Path, quiet: bool) -> Result<LoadedStep> {
     let shown = path.display().to_string();
     let loaded = read_loaded(path, &ColumnMap::default(), true)?;
     let (exclude_current, exclude_speed) = check_clipping(&shown, &loaded, quiet)?;
-    let mut step = step_from_record(shown, loaded.record)?;
+    let label = file_lines(&shown, &loaded.lines);
+    let mut step = step_from_record(label, loaded.record)?;
+    step.path = shown;
     let from = loaded.lines.len() - step.current.len();
     step.exclude_current = exclude_current.map(|m| m[from..].to_vec());
     // The encoder speed has no ADC: only a tachometer column can be clipped.
@@ -124,6 +128,7 @@ pub fn step_from_record(shown: String, cols: Record) -> Result<LoadedStep> {
         (None, None) => None,
     };
     Ok(LoadedStep {
+        label: shown.clone(),
         path: shown,
         volts: loc.volts,
         dt: loc.dt,
@@ -517,7 +522,7 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
     let files = [hv.path.as_str(), lv.path.as_str()];
     let tests = [hv.test(), lv.test()];
     let settings = LmSettings::default();
-    let both = format!("{} / {}", files[0], files[1]);
+    let both = format!("{} / {}", hv.label, lv.label);
     let paper = if hv.has_clipping() || lv.has_clipping() {
         Err(
             "clipped samples: the paper's method reads the whole current and its steady values"
@@ -561,6 +566,8 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
 pub struct LoadedExcited {
     /// File it came from.
     pub path: String,
+    /// The file with the line span of its samples, for errors.
+    pub label: String,
     /// The record (SI units).
     pub record: Record,
     /// The voltage waveform rebuilt from the voltage column, time from the first sample.
@@ -590,25 +597,27 @@ pub fn load_excited(path: &Path, quiet: bool) -> Result<LoadedExcited> {
     let shown = path.display().to_string();
     let loaded = read_loaded(path, &ColumnMap::default(), true)?;
     let (exclude_current, exclude_speed) = check_clipping(&shown, &loaded, quiet)?;
+    let label = file_lines(&shown, &loaded.lines);
+    let header_line = loaded.lines.first().map_or(1, |l| l.saturating_sub(1));
     let rec = loaded.record;
     if rec.speed.is_none() && rec.position.is_none() {
         return Err(BadInput(format!(
-            "{shown}: neither speed nor position: k, f, J and Ts need one of them"
+            "{shown}:{header_line}: neither speed nor position: k, f, J and Ts need one of them"
         ))
         .into());
     }
     let input =
-        voltage_input(&rec.t, &rec.voltage).map_err(|e| BadInput(format!("{shown}: {e}")))?;
+        voltage_input(&rec.t, &rec.voltage).map_err(|e| BadInput(format!("{label}: {e}")))?;
     if input.peak_volts() == 0.0 {
         return Err(BadInput(format!(
-            "{shown}: the voltage is 0 V throughout ({}): nothing drives the motor",
-            loaded_span(&loaded.lines)
+            "{label}: the voltage is 0 V throughout: nothing drives the motor"
         ))
         .into());
     }
     let dt = (rec.t[rec.t.len() - 1] - rec.t[0]) / (rec.t.len() - 1) as f64;
     Ok(LoadedExcited {
         path: shown,
+        label,
         input,
         dt,
         exclude_current,
@@ -621,10 +630,10 @@ pub fn load_excited(path: &Path, quiet: bool) -> Result<LoadedExcited> {
     })
 }
 
-/// `lines a–b` of a whole record.
-fn loaded_span(lines: &[usize]) -> String {
+/// `file:a-b`: a file and the lines of its samples, for errors about a whole record.
+pub fn file_lines(shown: &str, lines: &[usize]) -> String {
     format!(
-        "lines {}–{}",
+        "{shown}:{}-{}",
         lines.first().copied().unwrap_or(0),
         lines.last().copied().unwrap_or(0)
     )
@@ -638,7 +647,11 @@ fn run_records(a: &IdentifyArgs) -> Result<()> {
         .map(|p| load_excited(p, a.quiet))
         .collect::<Result<Vec<_>>>()?;
     let files: Vec<&str> = loaded.iter().map(|l| l.path.as_str()).collect();
-    let all = files.join(" / ");
+    let all = loaded
+        .iter()
+        .map(|l| l.label.as_str())
+        .collect::<Vec<_>>()
+        .join(" / ");
     let records: Vec<ExcitedRecord> = loaded.iter().map(LoadedExcited::excited).collect();
     let start = match &a.start {
         Some(spec) => crate::settings::motor(spec)?,

@@ -1,0 +1,345 @@
+//! Broken record files: each gives a one-line error naming the file, the line and the problem,
+//! with exit code 2, and none panics.
+
+mod common;
+
+use common::{assert_bad_input, motorid, scratch, stderr};
+use std::path::{Path, PathBuf};
+
+const HEADER: &str = "t,voltage,current,speed\n";
+
+/// A plausible record of `n` rows after `header`.
+fn rows(n: usize) -> String {
+    (0..n)
+        .map(|i| {
+            let t = i as f64 * 1e-3;
+            let on = if i >= 5 { 40.0 } else { 0.0 };
+            format!("{t},{on},{},{}\n", on * (1.0 - (-t).exp()) / 0.3, 10.0 * t)
+        })
+        .collect()
+}
+
+fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
+
+/// Runs `motorid simulate` with `args` into `dir/name`.
+fn simulated(dir: &Path, name: &str, args: &[&str]) -> PathBuf {
+    let path = dir.join(name);
+    let mut all = vec!["simulate", "-o", path.to_str().unwrap()];
+    all.extend_from_slice(args);
+    let out = motorid(&all);
+    assert!(out.status.success(), "{}", stderr(&out));
+    path
+}
+
+#[test]
+fn broken_files_give_one_line_errors_naming_file_and_line() {
+    let dir = scratch("broken-files");
+    let good = rows(200);
+    let mut cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        (
+            "missing_current.csv",
+            format!("t,voltage,speed\n{}", "0,1,2\n1,1,2\n").into_bytes(),
+            ":1: no `current` column",
+        ),
+        (
+            "text_in_number.csv",
+            format!("{HEADER}{}0.5,40,abc,1\n", rows(3)).into_bytes(),
+            ":5: column `current`: `abc` is not a number",
+        ),
+        (
+            "nan.csv",
+            format!("{HEADER}{}0.5,40,NaN,1\n", rows(3)).into_bytes(),
+            ":5: column `current` is NaN",
+        ),
+        (
+            "inf.csv",
+            format!("{HEADER}{}0.5,inf,1,1\n", rows(3)).into_bytes(),
+            ":5: column `voltage` is inf",
+        ),
+        (
+            "overflow.csv",
+            format!("{HEADER}{}0.5,1e999,1,1\n", rows(3)).into_bytes(),
+            ":5: column `voltage` is inf",
+        ),
+        (
+            "time_backwards.csv",
+            format!("{HEADER}0,0,0,0\n0.002,0,0,0\n0.001,0,0,0\n").into_bytes(),
+            ":4: t goes back to 0.001 s",
+        ),
+        (
+            "time_repeats.csv",
+            format!("{HEADER}0,0,0,0\n0.001,0,0,0\n0.001,0,0,0\n").into_bytes(),
+            ":4: t repeats 0.001 s",
+        ),
+        (
+            "duplicate_header.csv",
+            b"t,voltage,current,current\n0,1,2,3\n".to_vec(),
+            ":1: columns `current` and `current` both give current",
+        ),
+        (
+            "alias_clash.csv",
+            b"t,voltage,current,omega,speed\n0,1,2,3,4\n".to_vec(),
+            ":1: columns `omega` and `speed` both give speed",
+        ),
+        ("empty.csv", Vec::new(), ":1: no header row (empty file?)"),
+        (
+            "only_comments.csv",
+            b"# motor: test\n# nothing else\n".to_vec(),
+            ":2: no header row",
+        ),
+        (
+            "header_only.csv",
+            HEADER.as_bytes().to_vec(),
+            ":1: no data rows after the header",
+        ),
+        (
+            "single_row.csv",
+            format!("{HEADER}0,40,1,0\n").into_bytes(),
+            ":2: a single data row",
+        ),
+        (
+            "unknown_unit.csv",
+            format!("t,voltage,current[furlong],speed\n{good}").into_bytes(),
+            ":1: column `current[furlong]`: unknown unit `furlong`",
+        ),
+        (
+            "unknown_column.csv",
+            format!("t,voltage,curent,speed\n{good}").into_bytes(),
+            ":1: unknown column `curent`",
+        ),
+        (
+            "no_header.csv",
+            good.clone().into_bytes(),
+            ":1: the first row `0,0,0,0` is numbers, not a header",
+        ),
+        (
+            "empty_name.csv",
+            b"t,,current\n0,1,2\n".to_vec(),
+            ":1: an empty column name",
+        ),
+        (
+            "cut_mid_line.csv",
+            format!("{HEADER}{}0.5,40", rows(3)).into_bytes(),
+            ":5: 2 fields where the header has 4",
+        ),
+        (
+            "cut_mid_number.csv",
+            format!("{HEADER}{}0.5,40,12.", rows(3)).into_bytes(),
+            ":5: 3 fields where the header has 4",
+        ),
+        (
+            "cut_no_newline.csv",
+            format!("{HEADER}{}0.005,40,1.2,0.0", rows(5)).into_bytes(),
+            ":7: the last line has no line break",
+        ),
+        (
+            "too_many_fields.csv",
+            format!("{HEADER}{}0.5,40,1,1,9\n", rows(3)).into_bytes(),
+            ":5: 5 fields where the header has 4",
+        ),
+        (
+            "semicolons.csv",
+            b"t;voltage;current\n0;1;2\n".to_vec(),
+            ":1: the header is separated by semicolons",
+        ),
+        (
+            "tabs.tsv",
+            b"t\tvoltage\tcurrent\n0\t1\t2\n".to_vec(),
+            ":1: the header is separated by tabs",
+        ),
+        (
+            "latin1.csv",
+            b"# caf\xe9\nt,voltage,current\n".to_vec(),
+            ":1: not UTF-8 text",
+        ),
+        (
+            "binary.png",
+            b"\x89PNG\r\n\x1a\n\0\0\0\rIHDR".to_vec(),
+            ":1: not UTF-8 text",
+        ),
+        (
+            "nul.csv",
+            b"t,voltage,current\n0,1\x002,3\n".to_vec(),
+            ":2: NUL byte",
+        ),
+        (
+            "all_zero_voltage.csv",
+            format!(
+                "{HEADER}{}",
+                (0..200)
+                    .map(|i| format!("{},0,0,0\n", i as f64 * 1e-3))
+                    .collect::<String>()
+            )
+            .into_bytes(),
+            ":2-201: the voltage is 0 V throughout",
+        ),
+        (
+            "no_speed.csv",
+            format!(
+                "t,voltage,current\n{}",
+                (0..200)
+                    .map(|i| format!("{},40,1\n", i as f64 * 1e-3))
+                    .collect::<String>()
+            )
+            .into_bytes(),
+            ":1: neither speed nor position",
+        ),
+    ];
+    // BOM and CRLF are read; the error is then the real problem further on (a text field).
+    let mut bom = b"\xef\xbb\xbf".to_vec();
+    bom.extend_from_slice(format!("{HEADER}{}0.5,40,x,1\n", rows(3)).as_bytes());
+    cases.push((
+        "bom_then_text.csv",
+        bom,
+        ":5: column `current`: `x` is not a number",
+    ));
+    let crlf = format!("{HEADER}{}0.5,40,y,1\n", rows(3)).replace('\n', "\r\n");
+    cases.push((
+        "crlf_then_text.csv",
+        crlf.into_bytes(),
+        ":5: column `current`: `y` is not a number",
+    ));
+    assert!(cases.len() >= 25);
+    for (name, bytes, needle) in &cases {
+        let path = write(&dir, name, bytes);
+        let shown = path.to_str().unwrap();
+        assert_bad_input(&["identify", "--record", shown], needle);
+        // Every message names the file.
+        assert_bad_input(&["identify", "--record", shown], shown);
+    }
+    // Not a file at all.
+    assert_bad_input(
+        &["identify", "--record", dir.to_str().unwrap()],
+        "a directory, not a record file",
+    );
+    assert_bad_input(
+        &["identify", "--record", "/no/such/record.csv"],
+        "/no/such/record.csv: cannot read",
+    );
+}
+
+/// A gigabyte of NUL bytes (a sparse file: no disk used) is refused at its first line, at once.
+#[test]
+fn a_gigabyte_of_garbage_is_refused_at_the_first_line() {
+    let dir = scratch("garbage");
+    let path = dir.join("huge.csv");
+    let file = std::fs::File::create(&path).unwrap();
+    file.set_len(1 << 30).unwrap();
+    drop(file);
+    assert_bad_input(
+        &["identify", "--record", path.to_str().unwrap()],
+        ":1: longer than 64 KiB without a line break",
+    );
+    // Random bytes with line breaks: refused at the first bad line.
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let garbage: Vec<u8> = (0..4_000_000)
+        .map(|_| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 24) as u8
+        })
+        .collect();
+    let path = write(&dir, "random.csv", &garbage);
+    let out = motorid(&["identify", "--record", path.to_str().unwrap()]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        !err.contains("panicked") && err.trim_end().lines().count() == 1,
+        "{err}"
+    );
+    assert!(err.contains("random.csv:1:"), "{err}");
+    std::fs::remove_file(dir.join("huge.csv")).unwrap();
+}
+
+/// Records that read well but cannot be identified: each error names the file and its lines.
+#[test]
+fn unusable_records_are_named_with_their_lines() {
+    let dir = scratch("unusable");
+    let logger = ["--adc-bits", "10", "--noise-lsb", "1", "--step-at", "0.005"];
+    let with = |v: &str, extra: &[&str]| -> Vec<String> {
+        let duration = if extra.contains(&"--duration") {
+            None
+        } else {
+            Some("20")
+        };
+        let mut a: Vec<String> = ["--voltage", v].iter().map(|s| s.to_string()).collect();
+        if let Some(d) = duration {
+            a.extend(["--duration".to_string(), d.to_string()]);
+        }
+        a.extend(logger.iter().map(|s| s.to_string()));
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a
+    };
+    let sim = |name: &str, args: Vec<String>| {
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        simulated(&dir, name, &refs)
+    };
+    let high = sim("high.csv", with("40", &[]));
+    let stuck = sim("stuck.csv", with("0.05", &[]));
+    let clipped = sim(
+        "clipped_current.csv",
+        with("40", &["--range-current", "-5,20"]),
+    );
+    let clipped_v = sim(
+        "clipped_voltage.csv",
+        with("40", &["--range-voltage", "-5,30"]),
+    );
+    let short_high = sim("short_high.csv", with("40", &["--duration", "3"]));
+    let short_low = sim("short_low.csv", with("2.5", &["--duration", "3"]));
+    let p = |x: &PathBuf| x.to_str().unwrap().to_string();
+    let cases: Vec<(Vec<String>, String)> = vec![
+        (
+            vec![
+                "identify".into(),
+                "--high".into(),
+                p(&high),
+                "--low".into(),
+                p(&stuck),
+            ],
+            format!("{}:7-20007", p(&stuck)),
+        ),
+        (
+            vec![
+                "identify".into(),
+                "--high".into(),
+                p(&high),
+                "--low".into(),
+                p(&stuck),
+            ],
+            "does not break the Coulomb friction".into(),
+        ),
+        (
+            vec!["identify".into(), "--record".into(), p(&clipped)],
+            "current samples".into(),
+        ),
+        (
+            vec!["identify".into(), "--record".into(), p(&clipped)],
+            "sit on an ADC rail at 20 (line".into(),
+        ),
+        (
+            vec!["identify".into(), "--record".into(), p(&clipped_v)],
+            "the fits need the applied voltage".into(),
+        ),
+        (
+            vec![
+                "identify".into(),
+                "--method".into(),
+                "paper".into(),
+                "--high".into(),
+                p(&short_high),
+                "--low".into(),
+                p(&short_low),
+            ],
+            "has not settled".into(),
+        ),
+    ];
+    for (args, needle) in &cases {
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        assert_bad_input(&refs, needle);
+    }
+}
