@@ -25,9 +25,40 @@ pub enum Command {
     Demo(DemoArgs),
     /// Monte Carlo check of the identification: errors and CI coverage over many noisy records.
     Montecarlo(MontecarloArgs),
+    /// Write a fleet of simulated motors (folders with motor.json, high.csv, low.csv) for
+    /// `identify --batch`.
+    Fleet(FleetArgs),
     /// The EMPS benchmark (real data): identify the axis, then simulate it in closed loop on the
     /// record with unmodelled force pulses and report where the model disagrees.
     Emps(EmpsArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct FleetArgs {
+    /// Folder to write the motors into (created if missing).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Number of motors.
+    #[arg(long, default_value_t = 200)]
+    pub motors: usize,
+    /// Each parameter is the base motor's times a factor in [1/SPREAD, SPREAD] (log-uniform).
+    #[arg(long, default_value_t = 1.5)]
+    pub spread: f64,
+    /// The base motor.
+    #[command(flatten)]
+    pub motor: MotorArg,
+    /// High-voltage step [V].
+    #[arg(long, default_value_t = 40.0, allow_hyphen_values = true)]
+    pub high_voltage: f64,
+    /// Low-voltage step [V].
+    #[arg(long, default_value_t = 2.5, allow_hyphen_values = true)]
+    pub low_voltage: f64,
+    /// Seed of the parameter draws and of the noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// No progress messages.
+    #[arg(long, short = 'q')]
+    pub quiet: bool,
 }
 
 #[derive(Debug, Args)]
@@ -145,6 +176,11 @@ pub struct IdentifyArgs {
     /// No progress messages or warnings on standard error (errors are still reported).
     #[arg(long, short = 'q')]
     pub quiet: bool,
+    /// Identify every motor folder under DIR in parallel (high.csv + low.csv: step method;
+    /// other *.csv: output error; motor.json, if present, is the truth to compare with) and
+    /// write DIR/summary.csv and DIR/summary.json.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["high", "low", "steady", "record"])]
+    pub batch: Option<PathBuf>,
     /// Column names of a file from another tool: t=HEADER,current=HEADER,position=HEADER,...
     #[arg(long, value_name = "NAME=HEADER,...")]
     pub columns: Option<String>,

@@ -10,6 +10,7 @@
 mod args;
 mod commands;
 mod paper_values;
+mod parallel;
 mod plot;
 mod record_csv;
 mod settings;
@@ -59,6 +60,7 @@ fn main() -> ExitCode {
         Command::Identify(a) => commands::identify::run(&a),
         Command::Demo(a) => commands::demo::run(&a),
         Command::Montecarlo(a) => commands::montecarlo::run(&a),
+        Command::Fleet(a) => commands::fleet::run(&a),
         Command::Emps(a) => commands::emps::run(&a),
     };
     match outcome {

@@ -133,3 +133,60 @@ fn clipped_samples_are_reported_and_left_out() {
     );
     assert_within_intervals(&stdout(&out));
 }
+
+/// Batch mode (the full 200-motor run is in the README): a fleet of 12 simulated motors is
+/// identified in parallel; the summary (CSV and JSON) holds one row per motor with its truth,
+/// and a broken folder is a row with its error, not the end of the batch (exit code 2).
+#[test]
+fn batch_identifies_a_fleet_and_reports_broken_folders() {
+    let dir = scratch("fleet");
+    let fleet = dir.join("fleet");
+    let _ = std::fs::remove_dir_all(&fleet);
+    let out = motorid(&[
+        "fleet",
+        "--out",
+        fleet.to_str().unwrap(),
+        "--motors",
+        "12",
+        "-q",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = motorid(&[
+        "identify",
+        "--batch",
+        fleet.to_str().unwrap(),
+        "--json",
+        "-q",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
+    assert_eq!(v["motors"], 12);
+    assert_eq!(v["converged"], 12, "{v}");
+    for row in v["rows"].as_array().unwrap() {
+        for (name, p) in row["parameters"].as_object().unwrap() {
+            let err = p["error_percent"].as_f64().unwrap().abs();
+            assert!(err < 1.0, "{}: {name} off by {err} %", row["motor"]);
+        }
+    }
+    let csv = std::fs::read_to_string(fleet.join("summary.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 13, "{csv}");
+    assert!(csv.starts_with("motor,method,status,iterations,seconds,R,R_ci_lo,R_ci_hi,R_truth"));
+    // A folder with a broken record.
+    let broken = fleet.join("motor_999");
+    std::fs::create_dir_all(&broken).unwrap();
+    std::fs::write(broken.join("high.csv"), "t,voltage,current\n0,1,x\n").unwrap();
+    std::fs::write(broken.join("low.csv"), "t,voltage,current\n0,1,2\n").unwrap();
+    let out = motorid(&["identify", "--batch", fleet.to_str().unwrap(), "-q"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    let text = stdout(&out);
+    assert!(
+        text.contains("13 motors: 12 identified, 0 not converged, 1 failed"),
+        "{text}"
+    );
+    let csv = std::fs::read_to_string(fleet.join("summary.csv")).unwrap();
+    let row = csv.lines().find(|l| l.starts_with("motor_999")).unwrap();
+    assert!(
+        row.contains("high.csv:2: column `current`: `x` is not a number"),
+        "{row}"
+    );
+}

@@ -512,6 +512,9 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
     if !a.record.is_empty() {
         return run_records(a);
     }
+    if let Some(dir) = &a.batch {
+        return crate::commands::batch::run(a, dir);
+    }
     let (Some(high), Some(low)) = (&a.high, &a.low) else {
         return Err(BadInput(
             "give --high HV.csv --low LV.csv (step records), or --steady FILE.csv ...".into(),
@@ -520,32 +523,7 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
     };
     let (hv, lv) = (load_step(high, a.quiet)?, load_step(low, a.quiet)?);
     let files = [hv.path.as_str(), lv.path.as_str()];
-    let tests = [hv.test(), lv.test()];
-    let settings = LmSettings::default();
-    let both = format!("{} / {}", hv.label, lv.label);
-    let paper = if hv.has_clipping() || lv.has_clipping() {
-        Err(
-            "clipped samples: the paper's method reads the whole current and its steady values"
-                .to_string(),
-        )
-    } else {
-        identify_paper(&tests[0], &tests[1], settings).map_err(|e| e.to_string())
-    };
-    let full = match (a.method, &paper) {
-        (MethodArg::Paper, Err(e)) => return Err(BadInput(format!("{both}: {e}")).into()),
-        (MethodArg::Paper, Ok(_)) => None,
-        (MethodArg::Full, _) => {
-            let start = match &paper {
-                Ok(p) => p.params,
-                Err(_) => steady_state_start(&tests[0], &tests[1])
-                    .map_err(|e| BadInput(format!("{both}: {e}")))?,
-            };
-            Some(
-                identify_full(&tests, &start, settings)
-                    .map_err(|e| BadInput(format!("{both}: {e}")))?,
-            )
-        }
-    };
+    let (paper, full) = identify_pair(&hv, &lv, a.method)?;
     let paper = paper.as_ref().map_err(String::as_str);
     let method = match a.method {
         MethodArg::Paper => "paper",
@@ -694,6 +672,46 @@ fn run_records(a: &IdentifyArgs) -> Result<()> {
         crate::commands::figures::fit_figures(dir, &loaded, &full.params, a.quiet)?;
     }
     converged(Some(&full))
+}
+
+/// Identifies a high- and a low-voltage step record: the paper's method (unless clipped
+/// samples rule it out), then with `MethodArg::Full` the full model started from it (or from
+/// the steady states where it does not apply).
+pub fn identify_pair(
+    hv: &LoadedStep,
+    lv: &LoadedStep,
+    method: MethodArg,
+) -> Result<(
+    std::result::Result<PaperIdentification, String>,
+    Option<FullFit>,
+)> {
+    let tests = [hv.test(), lv.test()];
+    let settings = LmSettings::default();
+    let both = format!("{} / {}", hv.label, lv.label);
+    let paper = if hv.has_clipping() || lv.has_clipping() {
+        Err(
+            "clipped samples: the paper's method reads the whole current and its steady values"
+                .to_string(),
+        )
+    } else {
+        identify_paper(&tests[0], &tests[1], settings).map_err(|e| e.to_string())
+    };
+    let full = match (method, &paper) {
+        (MethodArg::Paper, Err(e)) => return Err(BadInput(format!("{both}: {e}")).into()),
+        (MethodArg::Paper, Ok(_)) => None,
+        (MethodArg::Full, _) => {
+            let start = match &paper {
+                Ok(p) => p.params,
+                Err(_) => steady_state_start(&tests[0], &tests[1])
+                    .map_err(|e| BadInput(format!("{both}: {e}")))?,
+            };
+            Some(
+                identify_full(&tests, &start, settings)
+                    .map_err(|e| BadInput(format!("{both}: {e}")))?,
+            )
+        }
+    };
+    Ok((paper, full))
 }
 
 /// Exit status of a full fit: [`NotConverged`] with its residual when the solver gave up.

@@ -1,6 +1,8 @@
+pub mod batch;
 pub mod demo;
 pub mod emps;
 pub mod figures;
+pub mod fleet;
 pub mod identify;
 pub mod model;
 pub mod montecarlo;

@@ -1,11 +1,9 @@
 //! `motorid montecarlo`: how accurate are the two methods, and are the full method's 95 %
 //! intervals honest? Many noisy record pairs of one motor, identified by both methods.
 
-use std::sync::atomic::{AtomicUsize, Ordering};
-
 use anyhow::Result;
 use fit::{identify_full, identify_paper, steady_state_start, LmSettings, PARAM_NAMES};
-use motor_model::{MotorParams, StepResponse};
+use motor_model::{MeasurementModel, MotorParams, Record, StepResponse};
 use serde_json::json;
 
 use crate::args::{MeasurementArgs, MontecarloArgs, SpeedFromArg};
@@ -51,10 +49,17 @@ impl From<&MontecarloArgs> for Logger {
     }
 }
 
-/// A step of `volts` on `motor` recorded by `logger` with noise seed `seed`, located.
-pub fn record(logger: &Logger, motor: &MotorParams, volts: f64, seed: u64) -> Result<LoadedStep> {
+/// A step of `volts` at `at_s` \[s\] on `motor` recorded by `logger` with noise seed `seed`,
+/// with the measurement chain used.
+pub fn measured_step(
+    logger: &Logger,
+    motor: &MotorParams,
+    volts: f64,
+    at_s: f64,
+    seed: u64,
+) -> Result<(Record, MeasurementModel)> {
     let trace = StepResponse::new(motor, volts)
-        .trace(0.0, logger.duration_s, logger.rate_hz)
+        .trace(at_s, logger.duration_s, logger.rate_hz)
         .map_err(|e| BadInput(e.to_string()))?;
     let m = MeasurementArgs {
         adc_bits: Some(logger.adc_bits),
@@ -66,9 +71,14 @@ pub fn record(logger: &Logger, motor: &MotorParams, volts: f64, seed: u64) -> Re
         speed_from: SpeedFromArg::Encoder,
         seed,
     };
-    let rec = settings::measurement(&m, &trace)?
-        .apply(&trace)
-        .map_err(|e| BadInput(e.to_string()))?;
+    let model = settings::measurement(&m, &trace)?;
+    let rec = model.apply(&trace).map_err(|e| BadInput(e.to_string()))?;
+    Ok((rec, model))
+}
+
+/// A step of `volts` on `motor` recorded by `logger` with noise seed `seed`, located.
+pub fn record(logger: &Logger, motor: &MotorParams, volts: f64, seed: u64) -> Result<LoadedStep> {
+    let (rec, _) = measured_step(logger, motor, volts, 0.0, seed)?;
     step_from_record(format!("simulated {volts} V record (seed {seed})"), rec)
 }
 
@@ -123,38 +133,24 @@ pub fn run(a: &MontecarloArgs) -> Result<()> {
         return Err(BadInput("--runs 0: give at least one run".into()).into());
     }
     let motor = settings::motor(&a.motor.motor)?;
-    let threads = std::thread::available_parallelism()
-        .map_or(1, |n| n.get())
-        .min(a.runs);
-    let done = AtomicUsize::new(0);
+    let threads = crate::parallel::threads(a.runs);
     let started = std::time::Instant::now();
-    let mut results: Vec<Option<Result<Run>>> = (0..a.runs).map(|_| None).collect();
-    std::thread::scope(|scope| {
-        let chunks: Vec<_> = results
-            .chunks_mut(a.runs.div_ceil(threads))
-            .enumerate()
-            .collect();
-        let chunk_len = a.runs.div_ceil(threads);
-        for (c, chunk) in chunks {
-            let (motor, done) = (&motor, &done);
-            scope.spawn(move || {
-                for (j, slot) in chunk.iter_mut().enumerate() {
-                    *slot = Some(one_run(a, motor, c * chunk_len + j));
-                    let n = done.fetch_add(1, Ordering::Relaxed) + 1;
-                    if !a.json && (n % (a.runs / 10).max(1) == 0 || n == a.runs) {
-                        eprintln!(
-                            "  {n}/{} record pairs identified ({:.1} s)",
-                            a.runs,
-                            started.elapsed().as_secs_f64()
-                        );
-                    }
-                }
-            });
-        }
-    });
+    let results = crate::parallel::map(
+        a.runs,
+        |i| one_run(a, &motor, i),
+        |n| {
+            if !a.json && (n % (a.runs / 10).max(1) == 0 || n == a.runs) {
+                eprintln!(
+                    "  {n}/{} record pairs identified ({:.1} s)",
+                    a.runs,
+                    started.elapsed().as_secs_f64()
+                );
+            }
+        },
+    );
     let mut runs = Vec::new();
     let mut failures = Vec::new();
-    for r in results.into_iter().flatten() {
+    for r in results {
         match r {
             Ok(run) => runs.push(run),
             Err(e) => failures.push(e.to_string()),

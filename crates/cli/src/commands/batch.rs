@@ -1,0 +1,343 @@
+//! `motorid identify --batch DIR`: every motor folder under DIR identified in parallel, one
+//! summary table (CSV and JSON).
+//!
+//! A motor folder holds `high.csv` and `low.csv` (identified by the full model from the step
+//! method's start) or other `*.csv` records of any voltage waveform (output error). A
+//! `motor.json` beside them is the truth: the summary then gives each parameter's error and
+//! whether its 95 % interval contains the truth. One folder's failure is a row of the summary,
+//! not the end of the batch.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+use fit::{equation_error_start, identify_output_error, FullFit, LmSettings, PARAM_NAMES};
+use motor_model::MotorParams;
+use serde_json::{json, Value};
+
+use crate::args::{IdentifyArgs, MethodArg};
+use crate::commands::identify::{identify_pair, load_excited, load_step, LoadedExcited};
+use crate::record_csv::write_atomically;
+use crate::{parallel, settings, BadInput, NotConverged};
+
+/// Outcome of one folder.
+enum Outcome {
+    Fitted(Box<FullFit>),
+    Failed { bad_input: bool, message: String },
+}
+
+struct Row {
+    name: String,
+    method: &'static str,
+    outcome: Outcome,
+    truth: Option<MotorParams>,
+    seconds: f64,
+}
+
+/// The motor folders under `dir`, sorted by name.
+fn motor_folders(dir: &Path) -> Result<Vec<PathBuf>> {
+    let entries = std::fs::read_dir(dir).map_err(|e| {
+        BadInput(format!(
+            "--batch {}: cannot read the folder ({e})",
+            dir.display()
+        ))
+    })?;
+    let mut out: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_dir())
+        .collect();
+    out.sort();
+    if out.is_empty() {
+        return Err(BadInput(format!(
+            "--batch {}: no motor folders inside (expected DIR/NAME/high.csv and low.csv, or DIR/NAME/*.csv)",
+            dir.display()
+        ))
+        .into());
+    }
+    Ok(out)
+}
+
+/// Identifies one motor folder.
+fn identify_folder(folder: &Path) -> Row {
+    let started = std::time::Instant::now();
+    let name = folder
+        .file_name()
+        .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+    let truth_path = folder.join("motor.json");
+    let truth = truth_path
+        .exists()
+        .then(|| settings::motor(truth_path.to_str().unwrap_or_default()).ok())
+        .flatten();
+    let (high, low) = (folder.join("high.csv"), folder.join("low.csv"));
+    let (method, result): (&'static str, Result<FullFit>) = if high.exists() && low.exists() {
+        let fitted = (|| {
+            let (hv, lv) = (load_step(&high, true)?, load_step(&low, true)?);
+            let (_, full) = identify_pair(&hv, &lv, MethodArg::Full)?;
+            full.ok_or_else(|| anyhow::anyhow!("no full fit"))
+        })();
+        ("full", fitted)
+    } else {
+        let fitted = (|| {
+            let mut csvs: Vec<PathBuf> = std::fs::read_dir(folder)?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|x| x == "csv"))
+                .collect();
+            csvs.sort();
+            if csvs.is_empty() {
+                return Err(BadInput(format!(
+                    "{}: no high.csv/low.csv pair and no other *.csv record",
+                    folder.display()
+                ))
+                .into());
+            }
+            let loaded = csvs
+                .iter()
+                .map(|p| load_excited(p, true))
+                .collect::<Result<Vec<LoadedExcited>>>()?;
+            let records: Vec<_> = loaded.iter().map(LoadedExcited::excited).collect();
+            let start = equation_error_start(&records)
+                .map_err(|e| BadInput(format!("{}: {e}", folder.display())))?;
+            identify_output_error(&records, &start, LmSettings::default())
+                .map_err(|e| BadInput(format!("{}: {e}", folder.display())).into())
+        })();
+        ("output_error", fitted)
+    };
+    let outcome = match result {
+        Ok(fit) => Outcome::Fitted(Box::new(fit)),
+        Err(e) => Outcome::Failed {
+            bad_input: e.chain().any(|c| c.is::<BadInput>()),
+            message: format!("{e:#}"),
+        },
+    };
+    Row {
+        name,
+        method,
+        outcome,
+        truth,
+        seconds: started.elapsed().as_secs_f64(),
+    }
+}
+
+fn row_json(r: &Row) -> Value {
+    let mut obj = json!({"motor": r.name, "method": r.method, "seconds": r.seconds});
+    match &r.outcome {
+        Outcome::Failed { message, .. } => {
+            obj["status"] = json!("error");
+            obj["error"] = json!(message);
+        }
+        Outcome::Fitted(fit) => {
+            obj["status"] = json!(if fit.termination.converged() {
+                "ok"
+            } else {
+                "not converged"
+            });
+            obj["iterations"] = json!(fit.iterations);
+            let values = fit.params.values();
+            let mut params = serde_json::Map::new();
+            for k in 0..6 {
+                let mut p = json!({"value": values[k], "ci95": fit.ci95.map(|c| c[k])});
+                if let Some(t) = r.truth {
+                    let truth = t.values()[k];
+                    p["truth"] = json!(truth);
+                    p["error_percent"] = json!(100.0 * (values[k] / truth - 1.0));
+                    p["covered"] = json!(fit.ci95.map(|c| c[k][0] <= truth && truth <= c[k][1]));
+                }
+                params.insert(PARAM_NAMES[k].into(), p);
+            }
+            obj["parameters"] = Value::Object(params);
+        }
+    }
+    obj
+}
+
+/// The summary as CSV: one row per motor.
+fn summary_csv(rows: &[Row]) -> String {
+    let mut out = String::from("motor,method,status,iterations,seconds");
+    for name in PARAM_NAMES {
+        out.push_str(&format!(
+            ",{name},{name}_ci_lo,{name}_ci_hi,{name}_truth,{name}_error_percent"
+        ));
+    }
+    out.push_str(",error\n");
+    for r in rows {
+        let (status, iterations, values, ci, message) = match &r.outcome {
+            Outcome::Fitted(f) => (
+                if f.termination.converged() {
+                    "ok"
+                } else {
+                    "not converged"
+                },
+                f.iterations.to_string(),
+                Some(f.params.values()),
+                f.ci95,
+                String::new(),
+            ),
+            Outcome::Failed { message, .. } => (
+                "error",
+                String::new(),
+                None,
+                None,
+                message.replace(['"', '\n'], "'"),
+            ),
+        };
+        out.push_str(&format!(
+            "{},{},{status},{iterations},{:.3}",
+            r.name, r.method, r.seconds
+        ));
+        for k in 0..6 {
+            let v = values.map(|v| v[k]);
+            let t = r.truth.map(|t| t.values()[k]);
+            let cell = |x: Option<f64>| x.map_or(String::new(), |x| format!("{x}"));
+            out.push_str(&format!(
+                ",{},{},{},{},{}",
+                cell(v),
+                cell(ci.map(|c| c[k][0])),
+                cell(ci.map(|c| c[k][1])),
+                cell(t),
+                cell(v.zip(t).map(|(v, t)| 100.0 * (v / t - 1.0)))
+            ));
+        }
+        out.push_str(&format!(",\"{message}\"\n"));
+    }
+    out
+}
+
+fn median(mut xs: Vec<f64>) -> f64 {
+    if xs.is_empty() {
+        return f64::NAN;
+    }
+    xs.sort_by(f64::total_cmp);
+    xs[xs.len() / 2]
+}
+
+pub fn run(a: &IdentifyArgs, dir: &Path) -> Result<()> {
+    let folders = motor_folders(dir)?;
+    let n = folders.len();
+    let threads = parallel::threads(n);
+    let started = std::time::Instant::now();
+    if !a.quiet {
+        eprintln!("identifying {n} motors on {threads} threads…");
+    }
+    let rows = parallel::map(
+        n,
+        |i| identify_folder(&folders[i]),
+        |done| {
+            if !a.quiet && (done % (n / 10).max(1) == 0 || done == n) {
+                eprintln!(
+                    "  {done}/{n} motors ({:.1} s)",
+                    started.elapsed().as_secs_f64()
+                );
+            }
+        },
+    );
+    let elapsed = started.elapsed().as_secs_f64();
+    let csv_path = dir.join("summary.csv");
+    let json_path = dir.join("summary.json");
+    write_atomically(&csv_path, summary_csv(&rows).as_bytes())?;
+    let ok = rows
+        .iter()
+        .filter(|r| matches!(&r.outcome, Outcome::Fitted(f) if f.termination.converged()))
+        .count();
+    let not_converged = rows
+        .iter()
+        .filter(|r| matches!(&r.outcome, Outcome::Fitted(f) if !f.termination.converged()))
+        .count();
+    let failed = n - ok - not_converged;
+    let fitted: Vec<&Row> = rows
+        .iter()
+        .filter(|r| r.truth.is_some() && matches!(r.outcome, Outcome::Fitted(_)))
+        .collect();
+    let mut aggregate = Vec::new();
+    for k in 0..6 {
+        let mut errors = Vec::new();
+        let (mut covered, mut with_ci) = (0, 0);
+        for r in &fitted {
+            let (Outcome::Fitted(f), Some(t)) = (&r.outcome, r.truth) else {
+                continue;
+            };
+            let truth = t.values()[k];
+            errors.push((100.0 * (f.params.values()[k] / truth - 1.0)).abs());
+            if let Some(c) = f.ci95 {
+                with_ci += 1;
+                covered += usize::from(c[k][0] <= truth && truth <= c[k][1]);
+            }
+        }
+        aggregate.push((PARAM_NAMES[k], median(errors), covered, with_ci));
+    }
+    let report = json!({
+        "motors": n, "converged": ok, "not_converged": not_converged, "failed": failed,
+        "seconds": elapsed, "threads": threads,
+        "against_truth": aggregate.iter().map(|(name, med, cov, with)| json!({
+            "parameter": name, "median_abs_error_percent": med, "ci95_covered": cov, "with_ci": with,
+        })).collect::<Vec<_>>(),
+        "rows": rows.iter().map(row_json).collect::<Vec<_>>(),
+    });
+    write_atomically(
+        &json_path,
+        serde_json::to_string_pretty(&report)?.as_bytes(),
+    )?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        println!(
+            "{:<16} {:<13} {:>12} {:>12} {:>12} {:>12} {:>12} {:>12}",
+            "motor", "status", "R", "L", "k", "f", "J", "Ts"
+        );
+        for r in &rows {
+            match &r.outcome {
+                Outcome::Fitted(f) => {
+                    let v = f.params.values();
+                    println!(
+                        "{:<16} {:<13} {:>12.5e} {:>12.5e} {:>12.5e} {:>12.5e} {:>12.5e} {:>12.5e}",
+                        r.name,
+                        if f.termination.converged() {
+                            "ok"
+                        } else {
+                            "not converged"
+                        },
+                        v[0],
+                        v[1],
+                        v[2],
+                        v[3],
+                        v[4],
+                        v[5]
+                    );
+                }
+                Outcome::Failed { message, .. } => println!("{:<16} error: {message}", r.name),
+            }
+        }
+        println!(
+            "{n} motors: {ok} identified, {not_converged} not converged, {failed} failed; {elapsed:.1} s on {threads} threads"
+        );
+        if !fitted.is_empty() {
+            println!("against motor.json (median |error|, 95 % intervals containing the truth):");
+            for (name, med, cov, with) in &aggregate {
+                println!("  {name:<3} {med:>9.4} %   {cov}/{with}");
+            }
+        }
+        println!("wrote {} and {}", csv_path.display(), json_path.display());
+    }
+    let bad = rows.iter().any(|r| {
+        matches!(
+            r.outcome,
+            Outcome::Failed {
+                bad_input: true,
+                ..
+            }
+        )
+    });
+    if bad || failed > 0 {
+        return Err(BadInput(format!(
+            "{failed} of {n} motors could not be identified (see the error column of {})",
+            csv_path.display()
+        ))
+        .into());
+    }
+    if not_converged > 0 {
+        return Err(NotConverged(format!(
+            "{not_converged} of {n} fits did not converge (see {})",
+            csv_path.display()
+        ))
+        .into());
+    }
+    Ok(())
+}
