@@ -19,7 +19,9 @@ pub enum Command {
     Model(ModelArgs),
     /// Simulate a motor (exact analytic step or stick-slip ODE with effects) to a record CSV.
     Simulate(Box<SimulateArgs>),
-    /// Identify R, L, k, f, J, Ts from a high- and a low-voltage step record (or Ts from steady tests).
+    /// Identify R, L, k, f, J, Ts: from a high- and a low-voltage step record, from records of any
+    /// voltage waveform (--record), a current-driven axis (--input current), Ts from steady tests,
+    /// or a whole fleet (--batch).
     Identify(IdentifyArgs),
     /// Run the paper's example end to end and compare with its printed tables.
     Demo(DemoArgs),

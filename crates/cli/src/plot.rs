@@ -153,9 +153,15 @@ where
     Ok(())
 }
 
-/// `stem.svg` and `stem.png`.
+/// `stem.svg` and `stem.png` (appended: a stem may hold dots, `paper_2.5V_fit`).
 fn paths(stem: &Path) -> (PathBuf, PathBuf) {
-    (stem.with_extension("svg"), stem.with_extension("png"))
+    let with = |ext: &str| {
+        let mut name = stem.as_os_str().to_owned();
+        name.push(".");
+        name.push(ext);
+        PathBuf::from(name)
+    };
+    (with("svg"), with("png"))
 }
 
 /// Renders a figure of `size` into `stem.svg` and `stem.png` (each written atomically) with

@@ -16,7 +16,7 @@ use serde_json::{json, Value};
 
 use crate::args::{IdentifyArgs, MethodArg};
 use crate::commands::identify::{identify_pair, load_excited, load_step, LoadedExcited};
-use crate::record_csv::write_atomically;
+use crate::record_csv::{write_atomically, ColumnMap};
 use crate::{parallel, settings, BadInput, NotConverged};
 
 /// Outcome of one folder.
@@ -70,7 +70,10 @@ fn identify_folder(folder: &Path) -> Row {
     let (high, low) = (folder.join("high.csv"), folder.join("low.csv"));
     let (method, result): (&'static str, Result<FullFit>) = if high.exists() && low.exists() {
         let fitted = (|| {
-            let (hv, lv) = (load_step(&high, true)?, load_step(&low, true)?);
+            let (hv, lv) = (
+                load_step(&high, &ColumnMap::default(), true)?,
+                load_step(&low, &ColumnMap::default(), true)?,
+            );
             let (_, full) = identify_pair(&hv, &lv, MethodArg::Full)?;
             full.ok_or_else(|| anyhow::anyhow!("no full fit"))
         })();
@@ -91,7 +94,7 @@ fn identify_folder(folder: &Path) -> Row {
             }
             let loaded = csvs
                 .iter()
-                .map(|p| load_excited(p, true))
+                .map(|p| load_excited(p, &ColumnMap::default(), true))
                 .collect::<Result<Vec<LoadedExcited>>>()?;
             let records: Vec<_> = loaded.iter().map(LoadedExcited::excited).collect();
             let start = equation_error_start(&records)

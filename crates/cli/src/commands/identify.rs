@@ -100,9 +100,9 @@ pub fn check_clipping(shown: &str, loaded: &Loaded, quiet: bool) -> Result<ClipM
 
 /// Reads `path`, finds the step and keeps the samples from it on; clipped samples are left out
 /// of the fits (and a record with too many is refused).
-pub fn load_step(path: &Path, quiet: bool) -> Result<LoadedStep> {
+pub fn load_step(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedStep> {
     let shown = path.display().to_string();
-    let loaded = read_loaded(path, &ColumnMap::default(), true)?;
+    let loaded = read_loaded(path, map, true)?;
     let (exclude_current, exclude_speed) = check_clipping(&shown, &loaded, quiet)?;
     let label = file_lines(&shown, &loaded.lines);
     let mut step = step_from_record(label, loaded.record)?;
@@ -423,11 +423,7 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
     if !(k.is_finite() && k > 0.0) {
         return Err(BadInput(format!("--torque-constant {k}: expected a positive number")).into());
     }
-    let map = match &a.columns {
-        Some(text) => ColumnMap::parse(text)?,
-        None => ColumnMap::default(),
-    };
-    let rec = read_mapped(path, &map, false)?;
+    let rec = read_mapped(path, &column_map(a)?, false)?;
     let shown = path.display();
     let position = rec.position.as_ref().ok_or_else(|| {
         BadInput(format!("{shown}: no position column: --input current fits J, f, Ts from the position (map it with --columns position=HEADER)"))
@@ -521,7 +517,11 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
         )
         .into());
     };
-    let (hv, lv) = (load_step(high, a.quiet)?, load_step(low, a.quiet)?);
+    let map = column_map(a)?;
+    let (hv, lv) = (
+        load_step(high, &map, a.quiet)?,
+        load_step(low, &map, a.quiet)?,
+    );
     let files = [hv.path.as_str(), lv.path.as_str()];
     let (paper, full) = identify_pair(&hv, &lv, a.method)?;
     let paper = paper.as_ref().map_err(String::as_str);
@@ -536,6 +536,13 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
         );
     } else {
         print_table(method, paper, full.as_ref(), &files);
+    }
+    if let (Some(dir), Some(f)) = (&a.plot, &full) {
+        let records = [high, low]
+            .iter()
+            .map(|p| load_excited(p, &map, true))
+            .collect::<Result<Vec<_>>>()?;
+        crate::commands::figures::fit_figures(dir, &records, &f.params, a.quiet)?;
     }
     converged(full.as_ref())
 }
@@ -571,9 +578,9 @@ impl LoadedExcited {
 }
 
 /// Reads a record of any voltage waveform for the output-error fit.
-pub fn load_excited(path: &Path, quiet: bool) -> Result<LoadedExcited> {
+pub fn load_excited(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedExcited> {
     let shown = path.display().to_string();
-    let loaded = read_loaded(path, &ColumnMap::default(), true)?;
+    let loaded = read_loaded(path, map, true)?;
     let (exclude_current, exclude_speed) = check_clipping(&shown, &loaded, quiet)?;
     let label = file_lines(&shown, &loaded.lines);
     let header_line = loaded.lines.first().map_or(1, |l| l.saturating_sub(1));
@@ -619,10 +626,11 @@ pub fn file_lines(shown: &str, lines: &[usize]) -> String {
 
 /// `--record A.csv --record B.csv ...`: all six parameters by output error.
 fn run_records(a: &IdentifyArgs) -> Result<()> {
+    let map = column_map(a)?;
     let loaded = a
         .record
         .iter()
-        .map(|p| load_excited(p, a.quiet))
+        .map(|p| load_excited(p, &map, a.quiet))
         .collect::<Result<Vec<_>>>()?;
     let files: Vec<&str> = loaded.iter().map(|l| l.path.as_str()).collect();
     let all = loaded
@@ -672,6 +680,14 @@ fn run_records(a: &IdentifyArgs) -> Result<()> {
         crate::commands::figures::fit_figures(dir, &loaded, &full.params, a.quiet)?;
     }
     converged(Some(&full))
+}
+
+/// The `--columns` mapping, if given.
+fn column_map(a: &IdentifyArgs) -> Result<ColumnMap> {
+    match &a.columns {
+        Some(text) => ColumnMap::parse(text),
+        None => Ok(ColumnMap::default()),
+    }
 }
 
 /// Identifies a high- and a low-voltage step record: the paper's method (unless clipped

@@ -114,7 +114,26 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     match a.output.as_deref() {
         Some(path) if path.as_os_str() != "-" => {
             record_csv::write_file(path, &record, &meta)?;
-            let clipped: usize = record.clipped.iter().sum();
+            // Samples at a non-zero rail, as `identify` will find them (a signal at rest on a
+            // unipolar range sits on its zero rail: that is not lost information).
+            let clipped: usize = match measurement.adc {
+                Some(adc) => [
+                    Some(&record.voltage),
+                    Some(&record.current),
+                    record.speed.as_ref(),
+                ]
+                .iter()
+                .zip(measurement.ranges)
+                .filter_map(|(col, range)| Some((col.as_ref()?, range?)))
+                .map(|(col, r)| {
+                    fit::find_clipping(col, Some([r.lo, r.hi]), 0.5 * adc.lsb(r))
+                        .iter()
+                        .filter(|&&c| c)
+                        .count()
+                })
+                .sum(),
+                None => 0,
+            };
             eprintln!(
                 "wrote {} samples ({} s at {} Hz) to {}{}",
                 record.t.len(),
