@@ -568,8 +568,10 @@ fn current_driven_input_errors_name_what_is_missing() {
                 "current",
                 "--record",
                 rec.to_str().unwrap(),
+                "--columns",
+                "t=time_s,current=vir,position=qm",
             ],
-            "needs --torque-constant",
+            "needs --torque-constant K (the torque or force per unit of the current column) or a voltage column",
         ),
         (
             vec![

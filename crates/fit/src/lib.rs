@@ -52,7 +52,9 @@ pub use mechanical::{
     identify_inverse_model, InverseModelSettings, MechanicalFit, MECHANICAL_NAMES,
 };
 pub use model33::{fit_33, Fit33, Params33, Record33};
-pub use output_error::{equation_error_start, identify_output_error, voltage_input, ExcitedRecord};
+pub use output_error::{
+    electrical_equation, equation_error_start, identify_output_error, voltage_input, ExcitedRecord,
+};
 pub use paper_method::{
     from_high_voltage, identify_paper, speed_check_c8, suggested_low_voltage_45,
     tau_m_as_printed_37, with_low_voltage, HighVoltageResult, PaperIdentification, SpeedCheck,

@@ -493,14 +493,28 @@ pub fn equation_error_start(records: &[ExcitedRecord<'_>]) -> Result<MotorParams
     }
 }
 
-/// One equation-error estimate with the electrical signals low-passed at `fraction` of the
-/// sample rate (the angle at a fifth of that, with decimation by 5).
-fn equation_error_estimate(
+/// R \[Ω\], L \[H\] and k \[N·m/A\] from Eq. (2a) `E = R I + L dI/dt + k Ω` by least squares
+/// over every sample of `records`, the current and angle low-passed forward and backward (zero
+/// phase, 4th-order Butterworth) at `fraction` of the sample rate and differentiated by central
+/// differences. The torque constant of a drive that closes its own current loop follows from
+/// its armature voltage this way (`motorid identify --input current` without
+/// `--torque-constant`). An L the records cannot resolve (≤ 0) is replaced by half a sample's
+/// worth, `R dt/2`.
+pub fn electrical_equation(
     records: &[ExcitedRecord<'_>],
     fraction: f64,
-) -> Result<MotorParams, FitError> {
+) -> Result<[f64; 3], FitError> {
+    electrical_estimate(records, fraction).map(|(x, _)| x)
+}
+
+/// [`electrical_equation`], also returning each record's sample period and angle.
+#[allow(clippy::type_complexity)]
+fn electrical_estimate(
+    records: &[ExcitedRecord<'_>],
+    fraction: f64,
+) -> Result<([f64; 3], Vec<(f64, Vec<f64>)>), FitError> {
     let domain = |reason: String| FitError::MethodDomain {
-        equation: "equation-error start (Eq. (2))",
+        equation: "voltage equation (2a)",
         reason,
     };
     let mut ata = nalgebra::Matrix3::<f64>::zeros();
@@ -565,6 +579,20 @@ fn equation_error_estimate(
     if !(l > 0.0 && l.is_finite()) {
         l = 0.5 * r * dt_min;
     }
+    Ok(([r, l, k], per_record))
+}
+
+/// One equation-error estimate with the electrical signals low-passed at `fraction` of the
+/// sample rate (the angle at a fifth of that, with decimation by 5).
+fn equation_error_estimate(
+    records: &[ExcitedRecord<'_>],
+    fraction: f64,
+) -> Result<MotorParams, FitError> {
+    let domain = |reason: String| FitError::MethodDomain {
+        equation: "equation-error start (Eq. (2))",
+        reason,
+    };
+    let ([r, l, k], per_record) = electrical_estimate(records, fraction)?;
     // The mechanical side on the motor torque k I, record by record, pooled by sample count.
     let (mut sum, mut weight) = ([0.0; 3], 0.0);
     for (rec, (dt, position)) in records.iter().zip(&per_record) {

@@ -4,10 +4,10 @@ use std::path::Path;
 
 use anyhow::Result;
 use fit::{
-    equation_error_start, fit_apparent_resistance, identify_full, identify_inverse_model,
-    identify_output_error, identify_paper, locate_step, steady_state_start, voltage_input,
-    ExcitedRecord, FullFit, InverseModelSettings, LmSettings, PaperIdentification, StepTest,
-    MECHANICAL_NAMES, PARAM_NAMES, PARAM_UNITS,
+    electrical_equation, equation_error_start, fit_apparent_resistance, identify_full,
+    identify_inverse_model, identify_output_error, identify_paper, locate_step, steady_state_start,
+    voltage_input, ExcitedRecord, FullFit, InverseModelSettings, LmSettings, PaperIdentification,
+    StepTest, MECHANICAL_NAMES, PARAM_NAMES, PARAM_UNITS,
 };
 use motor_model::{central_difference, Derived, Input, Record};
 use serde_json::{json, Value};
@@ -417,12 +417,6 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
             .into())
         }
     };
-    let k = a.torque_constant.ok_or_else(|| {
-        BadInput("--input current needs --torque-constant K: the torque (force) per unit of the current column".into())
-    })?;
-    if !(k.is_finite() && k > 0.0) {
-        return Err(BadInput(format!("--torque-constant {k}: expected a positive number")).into());
-    }
     let rec = read_mapped(path, &column_map(a)?, false)?;
     let shown = path.display();
     let position = rec.position.as_ref().ok_or_else(|| {
@@ -433,6 +427,33 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
         (rec.t[n - 1] - rec.t[0]) / (n - 1) as f64
     } else {
         f64::NAN
+    };
+    // The torque constant: given, or from the voltage equation (2a) when the armature voltage
+    // is recorded.
+    let (k, k_source) = match a.torque_constant {
+        Some(k) if k.is_finite() && k > 0.0 => (k, "given"),
+        Some(k) => {
+            return Err(BadInput(format!("--torque-constant {k}: expected a positive number")).into())
+        }
+        None if !rec.voltage.is_empty() => {
+            let input = voltage_input(&rec.t, &rec.voltage)
+                .map_err(|e| BadInput(format!("{shown}: {e}")))?;
+            let excited = ExcitedRecord {
+                input: &input,
+                dt,
+                current: &rec.current,
+                speed: None,
+                position: Some(position),
+                exclude_current: None,
+                exclude_speed: None,
+            };
+            let [_, _, k] = electrical_equation(&[excited], a.cutoff * dt)
+                .map_err(|e| BadInput(format!("{shown}: k from the voltage: {e} (give --torque-constant K)")))?;
+            (k, "voltage equation (2a)")
+        }
+        None => {
+            return Err(BadInput("--input current needs --torque-constant K (the torque or force per unit of the current column) or a voltage column to estimate it from".into()).into())
+        }
     };
     let torque: Vec<f64> = rec.current.iter().map(|i| k * i).collect();
     let settings = InverseModelSettings {
@@ -467,7 +488,7 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
                     "matrix": (0..4).map(|i| (0..4).map(|j| c[(i, j)]).collect::<Vec<f64>>()).collect::<Vec<_>>(),
                 })),
             },
-            "settings": {"cutoff_hz": a.cutoff, "decimation": a.decimation, "torque_constant": k},
+            "settings": {"cutoff_hz": a.cutoff, "decimation": a.decimation, "torque_constant": k, "torque_constant_source": k_source},
         });
         println!("{}", serde_json::to_string_pretty(&report)?);
         return Ok(());
@@ -475,6 +496,9 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
     println!(
         "inverse model (current-driven axis): torque = J q'' + f q' + Ts sign(q') + offset, from {shown}"
     );
+    if k_source != "given" {
+        println!("torque constant k = {} from the {k_source}", sig(k));
+    }
     println!("      {:>12}   {:<27} unit", "value", "95% CI");
     for i in 0..4 {
         let ci = fit.ci95.map_or("-".to_string(), |c| {
