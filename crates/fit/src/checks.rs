@@ -17,29 +17,30 @@ fn bad(label: &str, reason: String) -> FitError {
     }
 }
 
-/// Basic soundness of one step test: enough samples, aligned finite channels, a real step,
-/// a current that varies, and (where speed or angle is measured) a rotor that moves.
-pub fn check_step_test(label: &str, t: &StepTest<'_>) -> Result<(), FitError> {
-    let n = t.current.len();
+/// The measured channels of one record and the samples left out of the fit.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Channels<'a> {
+    pub current: &'a [f64],
+    pub speed: Option<&'a [f64]>,
+    pub position: Option<&'a [f64]>,
+    pub exclude_current: Option<&'a [bool]>,
+    pub exclude_speed: Option<&'a [bool]>,
+}
+
+/// Channels of one record: enough samples, aligned and finite, exclusion masks of the same
+/// length leaving at least [`MIN_SAMPLES`] samples.
+pub(crate) fn check_channels(label: &str, c: Channels<'_>) -> Result<(), FitError> {
+    let n = c.current.len();
     if n < MIN_SAMPLES {
         return Err(bad(
             label,
             format!("{n} samples: at least {MIN_SAMPLES} are needed"),
         ));
     }
-    if !(t.dt.is_finite() && t.dt > 0.0 && t.t_first.is_finite() && t.t_first >= 0.0) {
-        return Err(bad(label, format!("first sample {} s after the step, period {} s: expected t_first ≥ 0 and a positive period", t.t_first, t.dt)));
-    }
-    if !(t.volts.is_finite() && t.volts != 0.0) {
-        return Err(bad(
-            label,
-            format!("step of {} V: expected a non-zero finite step", t.volts),
-        ));
-    }
     for (name, data) in [
-        ("current", Some(t.current)),
-        ("speed", t.speed),
-        ("position", t.position),
+        ("current", Some(c.current)),
+        ("speed", c.speed),
+        ("position", c.position),
     ] {
         let Some(y) = data else { continue };
         if y.len() != n {
@@ -58,7 +59,7 @@ pub fn check_step_test(label: &str, t: &StepTest<'_>) -> Result<(), FitError> {
             ));
         }
     }
-    for (name, mask) in [("current", t.exclude_current), ("speed", t.exclude_speed)] {
+    for (name, mask) in [("current", c.exclude_current), ("speed", c.exclude_speed)] {
         if let Some(m) = mask {
             if m.len() != n {
                 return Err(bad(
@@ -74,6 +75,31 @@ pub fn check_step_test(label: &str, t: &StepTest<'_>) -> Result<(), FitError> {
                 return Err(bad(label, format!("only {kept} {name} samples are left once the clipped ones are excluded: widen the ADC range")));
             }
         }
+    }
+    Ok(())
+}
+
+/// Basic soundness of one step test: enough samples, aligned finite channels, a real step,
+/// a current that varies, and (where speed or angle is measured) a rotor that moves.
+pub fn check_step_test(label: &str, t: &StepTest<'_>) -> Result<(), FitError> {
+    check_channels(
+        label,
+        Channels {
+            current: t.current,
+            speed: t.speed,
+            position: t.position,
+            exclude_current: t.exclude_current,
+            exclude_speed: t.exclude_speed,
+        },
+    )?;
+    if !(t.dt.is_finite() && t.dt > 0.0 && t.t_first.is_finite() && t.t_first >= 0.0) {
+        return Err(bad(label, format!("first sample {} s after the step, period {} s: expected t_first ≥ 0 and a positive period", t.t_first, t.dt)));
+    }
+    if !(t.volts.is_finite() && t.volts != 0.0) {
+        return Err(bad(
+            label,
+            format!("step of {} V: expected a non-zero finite step", t.volts),
+        ));
     }
     let span = |y: &[f64]| {
         y.iter().fold(f64::NEG_INFINITY, |m, &v| m.max(v))

@@ -143,6 +143,25 @@ fn values_of(theta: &[f64]) -> Option<[f64; 6]> {
 }
 
 impl OeProblem {
+    /// The problem of `records` (checked), simulated with RK4 steps of at most `max_step_s`.
+    fn new(records: &[ExcitedRecord<'_>], max_step_s: f64) -> Result<Self, FitError> {
+        let records = records
+            .iter()
+            .enumerate()
+            .map(|(k, r)| prepare(k, r))
+            .collect::<Result<Vec<_>, _>>()?;
+        let n_residuals = records
+            .iter()
+            .flat_map(|r| &r.channels)
+            .map(|c| c.data.len())
+            .sum();
+        Ok(OeProblem {
+            records,
+            n_residuals,
+            max_step_s,
+        })
+    }
+
     /// The simulated channels of every record at `values`: `[record][channel][kept sample]`.
     fn simulate(&self, values: [f64; 6]) -> Option<Vec<Vec<Vec<f64>>>> {
         let params = MotorParams::from_values(values).ok()?;
@@ -297,50 +316,21 @@ impl WeightedProblem for OeProblem {
 fn prepare(k: usize, rec: &ExcitedRecord<'_>) -> Result<OeRecord, FitError> {
     let label = format!("record {}", k + 1);
     let n = rec.current.len();
-    if n < crate::checks::MIN_SAMPLES {
-        return Err(bad(
-            label,
-            format!(
-                "{n} samples: at least {} are needed",
-                crate::checks::MIN_SAMPLES
-            ),
-        ));
-    }
+    crate::checks::check_channels(
+        &label,
+        crate::checks::Channels {
+            current: rec.current,
+            speed: rec.speed,
+            position: rec.position,
+            exclude_current: rec.exclude_current,
+            exclude_speed: rec.exclude_speed,
+        },
+    )?;
     if !(rec.dt.is_finite() && rec.dt > 0.0) {
         return Err(bad(
             label,
             format!("sample period {} s: expected a positive period", rec.dt),
         ));
-    }
-    for (name, data) in [
-        ("current", Some(rec.current)),
-        ("speed", rec.speed),
-        ("position", rec.position),
-    ] {
-        let Some(y) = data else { continue };
-        if y.len() != n {
-            return Err(bad(
-                &label,
-                format!(
-                    "{name} has {} samples where the current has {n}: the channels must align",
-                    y.len()
-                ),
-            ));
-        }
-        if let Some((i, v)) = y.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-            return Err(bad(&label, format!("{name} sample {i} is {v}")));
-        }
-    }
-    for (name, mask) in [
-        ("current", rec.exclude_current),
-        ("speed", rec.exclude_speed),
-    ] {
-        if mask.is_some_and(|m| m.len() != n) {
-            return Err(bad(
-                &label,
-                format!("the {name} exclusion mask does not have {n} samples"),
-            ));
-        }
     }
     let channel = |kind: Channel, full: Vec<f64>, mask: Option<&[bool]>| {
         let keep: Vec<usize> = (0..n).filter(|&i| !mask.is_some_and(|m| m[i])).collect();
@@ -371,11 +361,6 @@ fn prepare(k: usize, rec: &ExcitedRecord<'_>) -> Result<OeRecord, FitError> {
         }
         (None, None) => {}
     }
-    for ch in &channels {
-        if ch.data.len() < crate::checks::MIN_SAMPLES {
-            return Err(bad(&label, format!("only {} {} samples are left once the clipped ones are excluded: widen the ADC range", ch.data.len(), ch.kind.name())));
-        }
-    }
     Ok(OeRecord {
         input: rec.input.clone(),
         dt: rec.dt,
@@ -403,16 +388,6 @@ pub fn identify_output_error(
     if records.is_empty() {
         return Err(bad("records", "no record given".into()));
     }
-    let prepared = records
-        .iter()
-        .enumerate()
-        .map(|(k, r)| prepare(k, r))
-        .collect::<Result<Vec<_>, _>>()?;
-    let n_residuals = prepared
-        .iter()
-        .flat_map(|r| &r.channels)
-        .map(|c| c.data.len())
-        .sum();
     let max_step_s = Simulator::new(
         *start,
         Effects::none(),
@@ -424,11 +399,7 @@ pub fn identify_output_error(
     .map_err(|e| bad("start parameters", e.to_string()))?
     .max_step_s()
         * STEP_MARGIN;
-    let mut problem = OeProblem {
-        records: prepared,
-        n_residuals,
-        max_step_s,
-    };
+    let mut problem = OeProblem::new(records, max_step_s)?;
     fit_weighted(&mut problem, start, settings)
 }
 
@@ -446,21 +417,7 @@ const START_CUTOFFS: [f64; 4] = [0.1, 0.02, 0.004, 0.0008];
 /// simulation fits the records best (output-error cost) is returned. Values the records cannot
 /// resolve (an L below one sample, no friction seen) are replaced by small positive ones.
 pub fn equation_error_start(records: &[ExcitedRecord<'_>]) -> Result<MotorParams, FitError> {
-    let prepared = records
-        .iter()
-        .enumerate()
-        .map(|(k, r)| prepare(k, r))
-        .collect::<Result<Vec<_>, _>>()?;
-    let n_residuals = prepared
-        .iter()
-        .flat_map(|r| &r.channels)
-        .map(|c| c.data.len())
-        .sum();
-    let mut problem = OeProblem {
-        records: prepared,
-        n_residuals,
-        max_step_s: f64::INFINITY,
-    };
+    let mut problem = OeProblem::new(records, f64::INFINITY)?;
     let mut best: Option<(f64, MotorParams)> = None;
     let mut first_error = None;
     for fraction in START_CUTOFFS {
