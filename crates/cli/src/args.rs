@@ -30,9 +30,71 @@ pub enum Command {
     /// Write a fleet of simulated motors (folders with motor.json, high.csv, low.csv) for
     /// `identify --batch`.
     Fleet(FleetArgs),
+    /// Serve the emulated data logger (the paper's PIC logger, on the simulated motor) on a
+    /// pseudo-terminal: prints `PTY /dev/pts/N`, then serves until stopped.
+    Emulate(EmulateArgs),
+    /// Run a step test through the data logger on a serial port and write the record.
+    Acquire(AcquireArgs),
     /// The EMPS benchmark (real data): identify the axis, then simulate it in closed loop on the
     /// record with unmodelled force pulses and report where the model disagrees.
     Emps(EmpsArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct EmulateArgs {
+    /// Serve on a new pseudo-terminal pair (the only transport so far).
+    #[arg(long, required = true)]
+    pub pty: bool,
+    /// The motor on the logger.
+    #[command(flatten)]
+    pub motor: MotorArg,
+    /// Unmodelled effect NAME:key=value,... (repeatable), as in `simulate`.
+    #[arg(long = "effect", value_name = "NAME:KEY=VALUE,...")]
+    pub effects: Vec<String>,
+    /// Sample and send in real time (1 kHz, 115200 baud) instead of as fast as possible.
+    #[arg(long)]
+    pub realtime: bool,
+    /// Noise seed of the first test; test k uses SEED + k.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// ADC noise [LSB].
+    #[arg(long, default_value_t = 1.0)]
+    pub noise_lsb: f64,
+    /// Faults on what the logger sends: ber=RATE,drop=RATE,close=BYTES,seed=N.
+    #[arg(long, value_name = "KEY=VALUE,...")]
+    pub faults: Option<String>,
+    /// No messages on standard error.
+    #[arg(long, short = 'q')]
+    pub quiet: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct AcquireArgs {
+    /// Serial port of the logger (e.g. /dev/ttyUSB0, or the PTY printed by `motorid emulate`).
+    #[arg(long, value_name = "PATH")]
+    pub port: String,
+    /// Step voltage [V].
+    #[arg(long, value_name = "VOLTS", allow_hyphen_values = true)]
+    pub voltage: f64,
+    /// Test length [s].
+    #[arg(long, value_name = "S")]
+    pub duration: f64,
+    /// Sample rate [Hz].
+    #[arg(long, value_name = "HZ", default_value_t = 1000)]
+    pub rate: u16,
+    /// Stream the samples live during the test (what is lost is dumped afterwards).
+    #[arg(long)]
+    pub live: bool,
+    /// Calibration JSON: {"voltage": [V at 0 V, V at 5 V], "current": [A, A], "speed": [rad/s,
+    /// rad/s], "counts_per_rev": N}; default: the emulator's.
+    #[arg(long, value_name = "FILE.json")]
+    pub calibration: Option<PathBuf>,
+    /// Output record CSV (written atomically: never a partial file).
+    #[arg(short = 'o', long = "output", value_name = "FILE.csv")]
+    pub output: PathBuf,
+    /// No progress on standard error.
+    #[arg(long, short = 'q')]
+    pub quiet: bool,
 }
 
 #[derive(Debug, Args)]

@@ -9,6 +9,7 @@
 
 mod args;
 mod commands;
+mod daq_client;
 mod paper_values;
 mod parallel;
 mod plot;
@@ -61,6 +62,8 @@ fn main() -> ExitCode {
         Command::Demo(a) => commands::demo::run(&a),
         Command::Montecarlo(a) => commands::montecarlo::run(&a),
         Command::Fleet(a) => commands::fleet::run(&a),
+        Command::Emulate(a) => commands::emulate::run(&a),
+        Command::Acquire(a) => commands::acquire::run(&a),
         Command::Emps(a) => commands::emps::run(&a),
     };
     match outcome {

@@ -43,7 +43,7 @@ pub use axis::{simulate_pd_axis, AxisParams, PdController};
 pub use derived::{Derived, Regime};
 pub use error::ModelError;
 pub use measure::{
-    central_difference, Adc, MeasurementModel, NoiseRng, Range, Record, SpeedSource,
+    central_difference, Adc, MeasurementModel, NoiseRng, Range, Readings, Record, SpeedSource,
 };
 pub use params::MotorParams;
 pub use real::{Dual, Real};
@@ -52,7 +52,7 @@ pub use sim::effects::{
     QuadraticDrag, StribeckFriction, ThermalDrift, COPPER_ALPHA_PER_K, EFFECT_NAMES,
 };
 pub use sim::input::Input;
-pub use sim::simulator::{Simulator, Trace, MAX_SAMPLES};
+pub use sim::simulator::{simulate, Simulator, Trace, MAX_SAMPLES};
 pub use steady::{
     breakaway_time, standstill_current, steady_state, ApparentResistance, SteadyState,
 };

@@ -212,6 +212,56 @@ impl MeasurementModel {
     }
 }
 
+/// The raw readings a data logger stores for a measured trace: ADC codes of voltage, current
+/// and tachometer speed, and the encoder count (not wrapped: a logger's counter keeps its low
+/// bits).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Readings {
+    /// ADC codes of voltage, current and tachometer speed.
+    pub adc: [Vec<u32>; 3],
+    /// Encoder counts, `⌊θ/(2π/cpr)⌋`.
+    pub encoder: Vec<i64>,
+}
+
+impl MeasurementModel {
+    /// The readings behind [`MeasurementModel::apply`]: the same noise draws in the same
+    /// order (all voltage samples, then current, then the tachometer), the same quantisation,
+    /// so that converting them back (`Adc::to_value`, `count · 2π/cpr`) gives `apply`'s record
+    /// bit for bit. Needs an ADC, ranges for the three channels and an encoder.
+    pub fn readings(&self, trace: &Trace) -> Result<Readings, ModelError> {
+        let missing = |what: &str| ModelError::InvalidSetting {
+            name: what.into(),
+            value: 0.0,
+            expected: "an ADC, the three conditioning ranges and an encoder for logger readings",
+        };
+        let adc = self.adc.ok_or_else(|| missing("adc"))?;
+        let cpr = self
+            .encoder_counts_per_rev
+            .ok_or_else(|| missing("encoder"))?;
+        positive("encoder counts per revolution", f64::from(cpr))?;
+        let mut rng = NoiseRng::new(self.seed);
+        let mut channel = |idx: usize, values: &[f64]| -> Result<Vec<u32>, ModelError> {
+            let range = self.ranges[idx].ok_or_else(|| missing("range"))?;
+            Ok(values
+                .iter()
+                .map(|&v| adc.to_counts(range, v + self.noise_std[idx] * rng.normal()))
+                .collect())
+        };
+        let voltage = channel(0, &trace.voltage)?;
+        let current = channel(1, &trace.current)?;
+        let speed = channel(2, &trace.speed)?;
+        let quantum = std::f64::consts::TAU / f64::from(cpr);
+        Ok(Readings {
+            adc: [voltage, current, speed],
+            encoder: trace
+                .position
+                .iter()
+                .map(|th| (th / quantum).floor() as i64)
+                .collect(),
+        })
+    }
+}
+
 /// Derivative of `y` over `t` by central differences (one-sided at the ends) \[unit of y / s\].
 pub fn central_difference(t: &[f64], y: &[f64]) -> Vec<f64> {
     let n = t.len().min(y.len());
@@ -268,6 +318,50 @@ impl NoiseRng {
         let a = std::f64::consts::TAU * self.uniform();
         self.spare = Some(r * a.sin());
         r * a.cos()
+    }
+}
+
+#[cfg(test)]
+mod readings_tests {
+    use super::*;
+    use crate::{MotorParams, StepResponse};
+
+    #[test]
+    fn readings_convert_back_to_the_applied_record_bit_for_bit() {
+        let trace = StepResponse::new(&MotorParams::paper(), 40.0)
+            .trace(0.0, 2.0, 1000.0)
+            .unwrap();
+        let adc = Adc { bits: 10 };
+        let ranges = [
+            Range::new(-50.0, 50.0).unwrap(),
+            Range::new(-200.0, 200.0).unwrap(),
+            Range::new(-250.0, 250.0).unwrap(),
+        ];
+        let model = MeasurementModel {
+            adc: Some(adc),
+            ranges: ranges.map(Some),
+            noise_std: ranges.map(|r| adc.lsb(r)),
+            encoder_counts_per_rev: Some(2000),
+            speed_source: SpeedSource::Encoder,
+            seed: 7,
+        };
+        let record = model.apply(&trace).unwrap();
+        let readings = model.readings(&trace).unwrap();
+        let back = |c: usize| -> Vec<f64> {
+            readings.adc[c]
+                .iter()
+                .map(|&k| adc.to_value(ranges[c], k))
+                .collect()
+        };
+        assert_eq!(back(0), record.voltage);
+        assert_eq!(back(1), record.current);
+        let quantum = std::f64::consts::TAU / 2000.0;
+        let position: Vec<f64> = readings
+            .encoder
+            .iter()
+            .map(|&k| k as f64 * quantum)
+            .collect();
+        assert_eq!(Some(&position), record.position.as_ref());
     }
 }
 

@@ -20,23 +20,18 @@ pub fn trace(
     duration_s: f64,
     rate_hz: f64,
 ) -> Result<Trace> {
-    let analytic_applies = matches!(input, Input::Step { .. }) && effects.is_nominal();
-    let solver = solver.unwrap_or(if analytic_applies {
-        SolverArg::Analytic
-    } else {
-        SolverArg::Ode
-    });
     let result = match (solver, input) {
-        (SolverArg::Analytic, Input::Step { volts, at_s }) if effects.is_nominal() => {
+        (None, _) => motor_model::simulate(motor, effects, input, duration_s, rate_hz),
+        (Some(SolverArg::Analytic), Input::Step { volts, at_s }) if effects.is_nominal() => {
             StepResponse::new(motor, *volts).trace(*at_s, duration_s, rate_hz)
         }
-        (SolverArg::Analytic, _) => {
+        (Some(SolverArg::Analytic), _) => {
             return Err(BadInput(
                 "--solver analytic covers a voltage step on the nominal model only; use --solver ode for a sine or for --effect".into(),
             )
             .into())
         }
-        (SolverArg::Ode, _) => Simulator::new(*motor, effects, input.clone())
+        (Some(SolverArg::Ode), _) => Simulator::new(*motor, effects, input.clone())
             .and_then(|sim| sim.run(duration_s, rate_hz)),
     };
     result.map_err(|e| BadInput(e.to_string()).into())

@@ -313,6 +313,25 @@ impl Simulator {
     }
 }
 
+/// Simulates `input` on `params` with `effects` for `duration_s` \[s\] at `rate_hz` \[Hz\]:
+/// the exact analytic response ([`crate::StepResponse::trace`]) for a step on the nominal
+/// model, the stick-slip simulator otherwise. `motorid simulate` and the logger emulator both
+/// use it, so that their records agree sample for sample.
+pub fn simulate(
+    params: &MotorParams,
+    effects: Effects,
+    input: &Input,
+    duration_s: f64,
+    rate_hz: f64,
+) -> Result<Trace, ModelError> {
+    match input {
+        Input::Step { volts, at_s } if effects.is_nominal() => {
+            crate::StepResponse::new(params, *volts).trace(*at_s, duration_s, rate_hz)
+        }
+        _ => Simulator::new(*params, effects, input.clone())?.run(duration_s, rate_hz),
+    }
+}
+
 /// Number of samples `⌊duration·rate⌋ + 1` (t = 0 to `duration_s` \[s\] included) and the
 /// sample period \[s\], refusing non-positive settings and records over [`MAX_SAMPLES`].
 pub(crate) fn sample_grid(duration_s: f64, rate_hz: f64) -> Result<(usize, f64), ModelError> {

@@ -1,0 +1,95 @@
+//! `motorid emulate --pty`: the emulated data logger served on a pseudo-terminal.
+
+use std::io::{Read, Write};
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use daq_emu::host::{Emulator, LineFaults, Plant};
+use serialport::{SerialPort, TTYPort};
+
+use crate::args::EmulateArgs;
+use crate::{settings, BadInput};
+
+/// `ber=RATE,drop=RATE,close=BYTES,seed=N`.
+fn faults(text: &str) -> Result<LineFaults> {
+    let mut f = LineFaults::default();
+    for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        let (key, value) = item.split_once('=').ok_or_else(|| {
+            BadInput(format!(
+                "--faults: `{item}` is not KEY=VALUE (ber, drop, close, seed)"
+            ))
+        })?;
+        let number = |v: &str| -> Result<f64> {
+            v.parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite() && *x >= 0.0)
+                .ok_or_else(|| {
+                    BadInput(format!("--faults {key}={v}: expected a number ≥ 0")).into()
+                })
+        };
+        match key {
+            "ber" => f.bit_error_rate = number(value)?.min(1.0),
+            "drop" => f.drop_rate = number(value)?.min(1.0),
+            "close" => f.close_after = Some(number(value)? as u64),
+            "seed" => f.seed = number(value)? as u64,
+            _ => {
+                return Err(BadInput(format!(
+                    "--faults: unknown key `{key}`; the keys are ber, drop, close, seed"
+                ))
+                .into())
+            }
+        }
+    }
+    Ok(f)
+}
+
+pub fn run(a: &EmulateArgs) -> Result<()> {
+    let plant = Plant {
+        motor: settings::motor(&a.motor.motor)?,
+        effects: settings::effects(&a.effects)?,
+        noise_lsb: a.noise_lsb,
+        seed: a.seed,
+        ..Plant::default()
+    };
+    if !(a.noise_lsb.is_finite() && a.noise_lsb >= 0.0) {
+        return Err(BadInput(format!(
+            "--noise-lsb {}: expected zero or more",
+            a.noise_lsb
+        ))
+        .into());
+    }
+    let mut emulator = Emulator::new(plant, a.realtime);
+    if let Some(text) = &a.faults {
+        emulator = emulator.with_faults(faults(text)?);
+    }
+    let (mut master, slave) = TTYPort::pair().context("cannot create a pseudo-terminal pair")?;
+    let path = slave.name().context("the pseudo-terminal has no name")?;
+    println!("PTY {path}");
+    std::io::stdout().flush()?;
+    if !a.quiet {
+        eprintln!("emulated logger on {path} (115200 baud 8N1); Ctrl-C stops it");
+    }
+    // The slave stays open here, so that the master keeps working between clients.
+    let _slave = slave;
+    master.set_timeout(Duration::from_millis(5))?;
+    let mut buf = [0u8; 4096];
+    loop {
+        match master.read(&mut buf) {
+            Ok(n) => emulator.receive(&buf[..n]),
+            Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e).context("reading the pseudo-terminal"),
+        }
+        let out = emulator.run(Duration::from_millis(20));
+        if let Some(error) = emulator.take_error() {
+            if !a.quiet {
+                eprintln!("warning: the simulation refused the test: {error}");
+            }
+        }
+        if !out.is_empty() {
+            master
+                .write_all(&out)
+                .context("writing the pseudo-terminal")?;
+        }
+    }
+}

@@ -1,0 +1,659 @@
+//! The PC side of the logger protocol (`docs/wire-format.md`): runs a step test through a
+//! [`Link`] and collects every sample, re-requesting what the line lost; never returns a
+//! sample from a frame that failed its check.
+
+use std::io;
+use std::time::{Duration, Instant};
+
+use daq_emu::host::Calibration;
+use daq_protocol::{
+    encode, Command, DecodeError, Decoder, ErrorCode, Frame, Mode, Reply, Sample, State,
+    ALL_CHANNELS, MAX_FRAME,
+};
+use motor_model::{central_difference, Record};
+
+/// A byte link to the logger.
+pub trait Link {
+    /// Sends `bytes`.
+    fn send(&mut self, bytes: &[u8]) -> io::Result<()>;
+    /// Receives what arrives within `timeout` into `buf`; `Ok(0)` when nothing did.
+    fn recv(&mut self, buf: &mut [u8], timeout: Duration) -> io::Result<usize>;
+}
+
+/// What to acquire.
+#[derive(Debug, Clone, Copy)]
+pub struct TestPlan {
+    /// Step voltage \[V\].
+    pub volts: f64,
+    /// Test length \[s\].
+    pub duration_s: f64,
+    /// Sample rate \[Hz\].
+    pub rate_hz: u16,
+    /// Stream blocks live during the test (the rest, if any is lost, is dumped after).
+    pub live: bool,
+}
+
+impl TestPlan {
+    /// Samples the logger takes: `rate × duration_ms / 1000 + 1`, as the firmware counts them.
+    pub fn samples(&self) -> u64 {
+        u64::from(self.rate_hz) * self.duration_ms() / 1000 + 1
+    }
+
+    fn duration_ms(&self) -> u64 {
+        (self.duration_s * 1000.0).round() as u64
+    }
+}
+
+/// Counters for progress and for the report.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Stats {
+    /// Bytes received.
+    pub bytes: u64,
+    /// Frames received intact.
+    pub frames: u64,
+    /// Frames dropped by the decoder (bad CRC, stuffing, shape).
+    pub bad_frames: u64,
+    /// Frames missing according to the sequence numbers.
+    pub lost_frames: u64,
+    /// Commands sent again (timeouts) and dumps re-requested.
+    pub retries: u64,
+    /// Samples received so far, and expected.
+    pub samples: u64,
+    /// Samples the test takes.
+    pub expected: u64,
+}
+
+/// Why an acquisition failed; nothing is written then.
+#[derive(Debug)]
+pub enum AcquireError {
+    /// The line failed (port closed, I/O error).
+    Io(io::Error),
+    /// The logger stopped answering.
+    Silent(String),
+    /// The logger refused a command.
+    Refused(String),
+    /// Samples could not be recovered.
+    Lost(String),
+}
+
+impl std::fmt::Display for AcquireError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            AcquireError::Io(e) => write!(f, "the serial line failed: {e}"),
+            AcquireError::Silent(s) | AcquireError::Refused(s) | AcquireError::Lost(s) => {
+                f.write_str(s)
+            }
+        }
+    }
+}
+
+impl std::error::Error for AcquireError {}
+
+/// Time allowed for a reply to a command.
+const REPLY_TIMEOUT: Duration = Duration::from_millis(400);
+/// Attempts at a command.
+const ATTEMPTS: u32 = 8;
+/// Dump rounds in a row that recover nothing before the missing samples are given up.
+const STALLED_ROUNDS: u32 = 5;
+
+/// An owned copy of a decoded reply (the decoder's frames borrow its buffer).
+#[derive(Debug, Clone)]
+enum Got {
+    Status { state: State, stored: u32 },
+    Samples { first: u32, samples: Vec<Sample> },
+    End { total: u32 },
+    Error { code: ErrorCode, command: u8 },
+    Ack { command: u8 },
+}
+
+struct Session<'l, L: Link> {
+    link: &'l mut L,
+    decoder: Decoder<MAX_FRAME>,
+    seq: u8,
+    last_reply_seq: Option<u8>,
+    stats: Stats,
+    inbox: std::collections::VecDeque<Got>,
+}
+
+impl<L: Link> Session<'_, L> {
+    fn send(&mut self, command: Command) -> Result<(), AcquireError> {
+        let mut buf = [0u8; MAX_FRAME];
+        let n = encode(
+            &Frame::Command {
+                seq: self.seq,
+                command,
+            },
+            &mut buf,
+        )
+        .map_err(|e| AcquireError::Refused(format!("cannot encode {command:?}: {e:?}")))?;
+        self.seq = self.seq.wrapping_add(1);
+        // A leading 00 ends any garbage the logger holds, so this frame starts clean.
+        let mut out = Vec::with_capacity(n + 1);
+        out.push(0);
+        out.extend_from_slice(&buf[..n]);
+        self.link.send(&out).map_err(AcquireError::Io)
+    }
+
+    /// Reads from the line for up to `timeout`, queueing whole replies; returns whether any
+    /// arrived.
+    fn pump(&mut self, timeout: Duration) -> Result<bool, AcquireError> {
+        let mut buf = [0u8; 4096];
+        let n = self
+            .link
+            .recv(&mut buf, timeout)
+            .map_err(AcquireError::Io)?;
+        self.stats.bytes += n as u64;
+        let before = self.inbox.len();
+        for &b in &buf[..n] {
+            match self.decoder.feed(b) {
+                None => {}
+                Some(Err(DecodeError::Overflow | DecodeError::Stuffing | DecodeError::Crc))
+                | Some(Err(DecodeError::TooShort | DecodeError::Malformed)) => {
+                    self.stats.bad_frames += 1
+                }
+                Some(Ok(Frame::Command { .. })) => self.stats.bad_frames += 1,
+                Some(Ok(Frame::Reply { seq, reply })) => {
+                    self.stats.frames += 1;
+                    if let Some(last) = self.last_reply_seq {
+                        let gap = seq.wrapping_sub(last).wrapping_sub(1);
+                        if gap < 128 {
+                            self.stats.lost_frames += u64::from(gap);
+                        }
+                    }
+                    self.last_reply_seq = Some(seq);
+                    let got = match reply {
+                        Reply::Status { state, stored, .. } => Got::Status { state, stored },
+                        Reply::Samples { first, count, .. } => Got::Samples {
+                            first,
+                            samples: (0..usize::from(count))
+                                .filter_map(|i| reply.sample(i))
+                                .collect(),
+                        },
+                        Reply::End { total } => Got::End { total },
+                        Reply::Error { code, command } => Got::Error { code, command },
+                        Reply::Ack { command, .. } => Got::Ack { command },
+                    };
+                    self.inbox.push_back(got);
+                }
+            }
+        }
+        Ok(self.inbox.len() > before)
+    }
+
+    /// Sends `command` until `accept` takes a reply (other replies are kept in the inbox for
+    /// later), retrying on timeouts.
+    fn request<T>(
+        &mut self,
+        command: Command,
+        mut accept: impl FnMut(&Got) -> Option<Result<T, AcquireError>>,
+    ) -> Result<T, AcquireError> {
+        for attempt in 0..ATTEMPTS {
+            if attempt > 0 {
+                self.stats.retries += 1;
+            }
+            self.send(command)?;
+            let deadline = Instant::now() + REPLY_TIMEOUT;
+            while Instant::now() < deadline {
+                self.pump(Duration::from_millis(20))?;
+                let mut keep = std::collections::VecDeque::new();
+                let mut result = None;
+                while let Some(got) = self.inbox.pop_front() {
+                    if result.is_none() {
+                        if let Some(r) = accept(&got) {
+                            result = Some(r);
+                            continue;
+                        }
+                    }
+                    keep.push_back(got);
+                }
+                self.inbox = keep;
+                if let Some(r) = result {
+                    return r;
+                }
+            }
+        }
+        Err(AcquireError::Silent(format!(
+            "the logger did not answer {command:?} after {ATTEMPTS} attempts ({} bytes, {} frames received)",
+            self.stats.bytes, self.stats.frames
+        )))
+    }
+}
+
+/// The samples of a test and the counters of the transfer.
+#[derive(Debug, Clone)]
+pub struct Acquired {
+    /// Every sample of the test, in order.
+    pub samples: Vec<Sample>,
+    /// Sample rate \[Hz\].
+    pub rate_hz: u16,
+    /// Transfer counters.
+    pub stats: Stats,
+}
+
+/// The logger's refusal of `what`.
+fn refused<T>(what: &str, code: ErrorCode) -> Result<T, AcquireError> {
+    Err(AcquireError::Refused(format!(
+        "the logger refused {what}: {code:?}"
+    )))
+}
+
+/// Stores a block of samples from index `first`.
+fn store(samples: &mut [Option<Sample>], stats: &mut Stats, first: u32, block: &[Sample]) {
+    for (k, sample) in block.iter().enumerate() {
+        if let Some(slot) = samples.get_mut(first as usize + k) {
+            if slot.is_none() {
+                stats.samples += 1;
+            }
+            *slot = Some(*sample);
+        }
+    }
+}
+
+/// Waits for the end of the running test (storing live blocks), then dumps what is missing.
+fn collect<L: Link>(
+    s: &mut Session<'_, L>,
+    plan: &TestPlan,
+    samples: &mut [Option<Sample>],
+    progress: &mut impl FnMut(&Stats),
+) -> Result<(), AcquireError> {
+    let expected = samples.len() as u64;
+    // The test runs: live blocks arrive, or nothing until the end. Wait for the End, asking
+    // for the status now and then (progress, and in case the End is lost).
+    let test_time = Duration::from_secs_f64(plan.duration_s.max(0.0));
+    let started = Instant::now();
+    let mut last_status = Instant::now();
+    let mut finished = false;
+    let mut silent_since = Instant::now();
+    while !finished {
+        if s.pump(Duration::from_millis(50))? {
+            silent_since = Instant::now();
+        }
+        while let Some(got) = s.inbox.pop_front() {
+            match got {
+                Got::Samples {
+                    first,
+                    samples: block,
+                } => store(samples, &mut s.stats, first, &block),
+                Got::End { total } => {
+                    if u64::from(total) != expected {
+                        return Err(AcquireError::Lost(format!(
+                            "the logger ended the test after {total} of {expected} samples (stopped?) — nothing written"
+                        )));
+                    }
+                    finished = true;
+                }
+                Got::Status { state, stored }
+                    if state == State::Idle && u64::from(stored) == expected =>
+                {
+                    finished = true;
+                }
+                _ => {}
+            }
+        }
+        progress(&s.stats);
+        if !finished && last_status.elapsed() > Duration::from_millis(500) {
+            s.send(Command::Status)?;
+            last_status = Instant::now();
+        }
+        if silent_since.elapsed()
+            > Duration::from_secs(5) + test_time.saturating_sub(started.elapsed())
+        {
+            return Err(AcquireError::Silent(format!(
+                "the logger went silent during the test ({} of {expected} samples received, {} bytes)",
+                s.stats.samples, s.stats.bytes
+            )));
+        }
+    }
+    // Dump what is missing (everything in record mode), from the first missing sample to the
+    // last, until nothing is; give up after rounds that recover nothing.
+    let mut stalled = 0;
+    let mut round = 0u64;
+    while stalled < STALLED_ROUNDS {
+        let Some(from) = samples.iter().position(Option::is_none) else {
+            break;
+        };
+        let last = samples.iter().rposition(Option::is_none).unwrap_or(from);
+        if round > 0 {
+            s.stats.retries += 1;
+        }
+        round += 1;
+        let before = s.stats.samples;
+        let count = if last + 1 == samples.len() {
+            0
+        } else {
+            (last + 1 - from) as u32
+        };
+        let acked = s.request(
+            Command::Dump {
+                from: from as u32,
+                count,
+            },
+            |g| match g {
+                Got::Ack { command } if *command == daq_protocol::kind::DUMP => Some(Ok(())),
+                Got::Error { code, command } if *command == daq_protocol::kind::DUMP => {
+                    Some(refused("the dump", *code))
+                }
+                _ => None,
+            },
+        );
+        match acked {
+            Ok(()) => {}
+            Err(AcquireError::Silent(_)) => {
+                stalled = STALLED_ROUNDS;
+                continue;
+            }
+            Err(e) => return Err(e),
+        }
+        let mut silent_since = Instant::now();
+        loop {
+            if s.pump(Duration::from_millis(50))? {
+                silent_since = Instant::now();
+            }
+            let mut ended = false;
+            while let Some(got) = s.inbox.pop_front() {
+                match got {
+                    Got::Samples {
+                        first,
+                        samples: block,
+                    } => store(samples, &mut s.stats, first, &block),
+                    Got::End { .. } => ended = true,
+                    _ => {}
+                }
+            }
+            progress(&s.stats);
+            if ended || silent_since.elapsed() > Duration::from_secs(2) {
+                break;
+            }
+        }
+        if s.stats.samples == before {
+            stalled += 1;
+        } else {
+            stalled = 0;
+        }
+    }
+    Ok(())
+}
+
+/// Runs `plan` on the logger behind `link`; `progress` is called as data arrives.
+pub fn acquire<L: Link>(
+    link: &mut L,
+    plan: &TestPlan,
+    mut progress: impl FnMut(&Stats),
+) -> Result<Acquired, AcquireError> {
+    let expected = plan.samples();
+    if expected > u64::from(u32::MAX) || plan.duration_ms() > u64::from(u32::MAX) {
+        return Err(AcquireError::Refused(format!(
+            "{} s at {} Hz is beyond what the logger counts",
+            plan.duration_s, plan.rate_hz
+        )));
+    }
+    let mut s = Session {
+        link,
+        decoder: Decoder::new(),
+        seq: 0,
+        last_reply_seq: None,
+        stats: Stats {
+            expected,
+            ..Stats::default()
+        },
+        inbox: Default::default(),
+    };
+    // Where the logger stands: stop anything left running.
+    s.request(Command::Status, |g| match g {
+        Got::Status { .. } => Some(Ok(())),
+        _ => None,
+    })?;
+    s.request(Command::Stop, |g| match g {
+        Got::Ack { command } if *command == daq_protocol::kind::STOP => Some(Ok(())),
+        _ => None,
+    })?;
+    s.inbox.clear();
+    s.request(
+        Command::Configure {
+            rate_hz: plan.rate_hz,
+            channels: ALL_CHANNELS,
+        },
+        |g| match g {
+            Got::Ack { command } if *command == daq_protocol::kind::CONFIGURE => Some(Ok(())),
+            Got::Error { code, command } if *command == daq_protocol::kind::CONFIGURE => {
+                Some(refused("the configuration", *code))
+            }
+            _ => None,
+        },
+    )?;
+    let millivolts = (plan.volts * 1000.0).round();
+    if !(millivolts.is_finite() && millivolts.abs() <= f64::from(i32::MAX)) {
+        return Err(AcquireError::Refused(format!(
+            "{} V is beyond the logger's range",
+            plan.volts
+        )));
+    }
+    let mut armed_once = false;
+    s.request(
+        Command::Arm {
+            millivolts: millivolts as i32,
+            duration_ms: plan.duration_ms() as u32,
+            mode: if plan.live { Mode::Live } else { Mode::Record },
+        },
+        |g| match g {
+            Got::Ack { command } if *command == daq_protocol::kind::ARM => Some(Ok(())),
+            // An Arm whose Ack was lost, sent again, finds the test running.
+            Got::Error {
+                code: ErrorCode::Busy,
+                command,
+            } if *command == daq_protocol::kind::ARM && armed_once => Some(Ok(())),
+            Got::Error { code, command } if *command == daq_protocol::kind::ARM => {
+                armed_once = true;
+                if *code == ErrorCode::Busy {
+                    None
+                } else {
+                    Some(refused("the step test", *code))
+                }
+            }
+            _ => None,
+        },
+    )?;
+    let mut samples: Vec<Option<Sample>> = vec![None; expected as usize];
+    match collect(&mut s, plan, &mut samples, &mut progress) {
+        Ok(()) => {}
+        Err(AcquireError::Io(e)) => {
+            let missing = samples.iter().filter(|x| x.is_none()).count();
+            let first = samples.iter().position(Option::is_none).unwrap_or(0);
+            return Err(AcquireError::Lost(format!(
+                "the serial line failed ({e}) with {missing} of {expected} samples not received (first missing: sample {first}) — nothing written"
+            )));
+        }
+        Err(e) => return Err(e),
+    }
+    let missing: Vec<usize> = (0..samples.len())
+        .filter(|&i| samples[i].is_none())
+        .collect();
+    if let (Some(first), Some(last)) = (missing.first(), missing.last()) {
+        return Err(AcquireError::Lost(format!(
+            "{} of {expected} samples could not be recovered (first missing: sample {first}, last: {last}; {} frames failed their check, {} were lost) — nothing written",
+            missing.len(),
+            s.stats.bad_frames,
+            s.stats.lost_frames
+        )));
+    }
+    Ok(Acquired {
+        samples: samples.into_iter().flatten().collect(),
+        rate_hz: plan.rate_hz,
+        stats: s.stats,
+    })
+}
+
+/// The record of SPEC section 4 from a test's samples: times `i/rate`, voltage and current
+/// through the calibration, the encoder unwrapped into an angle, the speed its central
+/// difference (as the paper computed it; the tachometer is too noisy).
+pub fn to_record(acquired: &Acquired, calibration: &Calibration) -> Record {
+    let dt = 1.0 / f64::from(acquired.rate_hz);
+    let n = acquired.samples.len();
+    let t: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
+    let modulus = i64::from(daq_protocol::ENCODER_MODULUS);
+    let mut unwrapped = Vec::with_capacity(n);
+    let mut last: Option<(i64, i64)> = None;
+    for s in &acquired.samples {
+        let raw = i64::from(s[3]);
+        let value = match last {
+            None => {
+                if raw >= modulus / 2 {
+                    raw - modulus
+                } else {
+                    raw
+                }
+            }
+            Some((prev_raw, prev)) => {
+                let step = (raw - prev_raw).rem_euclid(modulus);
+                prev + if step >= modulus / 2 {
+                    step - modulus
+                } else {
+                    step
+                }
+            }
+        };
+        last = Some((raw, value));
+        unwrapped.push(value);
+    }
+    let position: Vec<f64> = unwrapped.iter().map(|&c| calibration.angle(c)).collect();
+    let channel = |c: usize| -> Vec<f64> {
+        acquired
+            .samples
+            .iter()
+            .map(|s| calibration.analog(c, s[c]))
+            .collect()
+    };
+    Record {
+        voltage: channel(0),
+        current: channel(1),
+        speed: Some(central_difference(&t, &position)),
+        position: Some(position),
+        t,
+        clipped: [0; 3],
+    }
+}
+
+#[cfg(test)]
+pub mod tests {
+    use super::*;
+    use daq_emu::host::{Emulator, LineFaults, Plant};
+
+    /// The emulator as a link, in-process: what is sent is received by the firmware, which
+    /// then runs until it has nothing to do.
+    pub struct EmulatorLink {
+        pub emulator: Emulator,
+        pending: Vec<u8>,
+    }
+
+    impl EmulatorLink {
+        pub fn new(emulator: Emulator) -> Self {
+            EmulatorLink {
+                emulator,
+                pending: Vec::new(),
+            }
+        }
+    }
+
+    impl Link for EmulatorLink {
+        fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
+            if self.emulator.line_closed() {
+                return Err(io::Error::new(
+                    io::ErrorKind::BrokenPipe,
+                    "the line is closed",
+                ));
+            }
+            self.emulator.receive(bytes);
+            Ok(())
+        }
+
+        fn recv(&mut self, buf: &mut [u8], _timeout: Duration) -> io::Result<usize> {
+            if self.pending.is_empty() {
+                self.pending = self.emulator.run(Duration::from_secs(5));
+            }
+            let n = self.pending.len().min(buf.len());
+            buf[..n].copy_from_slice(&self.pending[..n]);
+            self.pending.drain(..n);
+            Ok(n)
+        }
+    }
+
+    fn plan(volts: f64, live: bool) -> TestPlan {
+        TestPlan {
+            volts,
+            duration_s: 2.0,
+            rate_hz: 1000,
+            live,
+        }
+    }
+
+    /// What `motorid simulate` gives with the emulator's measurement settings.
+    fn simulated(volts: f64, seed: u64) -> Record {
+        let cal = Calibration::default();
+        let trace = motor_model::simulate(
+            &motor_model::MotorParams::paper(),
+            motor_model::Effects::none(),
+            &motor_model::Input::step(volts, 0.0).unwrap(),
+            2.0,
+            1000.0,
+        )
+        .unwrap();
+        cal.measurement(1.0, seed).unwrap().apply(&trace).unwrap()
+    }
+
+    #[test]
+    fn a_clean_line_gives_simulate_sample_for_sample_in_both_modes() {
+        let mut link = EmulatorLink::new(Emulator::new(Plant::default(), false));
+        for (k, live) in [(0u64, false), (1, true)] {
+            let got = acquire(&mut link, &plan(40.0, live), |_| {}).unwrap();
+            assert_eq!(got.samples.len(), 2001);
+            assert_eq!(got.stats.retries, 0);
+            let record = to_record(&got, &Calibration::default());
+            assert_eq!(record, simulated(40.0, 1 + k), "live = {live}");
+        }
+    }
+
+    #[test]
+    fn bit_errors_and_dropped_bytes_are_recovered_by_retransmission() {
+        for faults in [
+            LineFaults {
+                bit_error_rate: 1e-3,
+                seed: 3,
+                ..LineFaults::default()
+            },
+            LineFaults {
+                drop_rate: 1e-3,
+                seed: 4,
+                ..LineFaults::default()
+            },
+        ] {
+            let emulator = Emulator::new(Plant::default(), false).with_faults(faults);
+            let mut link = EmulatorLink::new(emulator);
+            let got = acquire(&mut link, &plan(40.0, false), |_| {}).unwrap();
+            assert!(
+                got.stats.bad_frames + got.stats.lost_frames > 0,
+                "{faults:?}: no fault seen"
+            );
+            assert!(got.stats.retries > 0, "{faults:?}");
+            let record = to_record(&got, &Calibration::default());
+            assert_eq!(record, simulated(40.0, 1), "{faults:?}: a wrong sample");
+        }
+    }
+
+    #[test]
+    fn a_line_closed_during_the_dump_is_an_error_that_says_what_was_lost() {
+        let faults = LineFaults {
+            close_after: Some(3000),
+            ..LineFaults::default()
+        };
+        let emulator = Emulator::new(Plant::default(), false).with_faults(faults);
+        let mut link = EmulatorLink::new(emulator);
+        let err = acquire(&mut link, &plan(40.0, false), |_| {}).unwrap_err();
+        let text = err.to_string();
+        eprintln!("{text}");
+        assert!(
+            text.contains("samples not received (first missing: sample"),
+            "{text}"
+        );
+        assert!(text.contains("nothing written"), "{text}");
+    }
+}
