@@ -158,8 +158,8 @@ pub struct HostBoard {
 #[derive(Debug, Clone, Copy)]
 struct Pacing {
     timer_start: Instant,
-    line_start: Instant,
-    bytes_sent: u64,
+    /// When the transmitter is free again (each byte takes 10 bit times).
+    line_free_at: Instant,
 }
 
 impl HostBoard {
@@ -179,8 +179,7 @@ impl HostBoard {
             tx: Vec::new(),
             paced: paced.then_some(Pacing {
                 timer_start: now,
-                line_start: now,
-                bytes_sent: 0,
+                line_free_at: now,
             }),
             error: None,
         }
@@ -279,12 +278,14 @@ impl Flash for HostBoard {
 impl Uart for HostBoard {
     fn write_byte(&mut self, byte: u8) -> bool {
         if let Some(p) = &mut self.paced {
-            let allowed =
-                p.line_start.elapsed().as_secs_f64() * f64::from(daq_protocol::LINE_BYTES_PER_S);
-            if (p.bytes_sent as f64) >= allowed {
+            let now = Instant::now();
+            if now < p.line_free_at {
                 return false;
             }
-            p.bytes_sent += 1;
+            let byte_time =
+                Duration::from_secs_f64(1.0 / f64::from(daq_protocol::LINE_BYTES_PER_S));
+            // An idle line does not bank time: the byte starts now at the earliest.
+            p.line_free_at = p.line_free_at.max(now) + byte_time;
         }
         self.tx.push(byte);
         true

@@ -91,5 +91,12 @@ pub fn run(a: &EmulateArgs) -> Result<()> {
                 .write_all(&out)
                 .context("writing the pseudo-terminal")?;
         }
+        if emulator.line_closed() {
+            // The `close` fault: the port goes away, as when a cable is pulled.
+            if !a.quiet {
+                eprintln!("the line is closed (--faults close): stopping");
+            }
+            return Ok(());
+        }
     }
 }
