@@ -302,7 +302,8 @@ impl Firmware {
                 ack(kind::STOP)
             }
             Command::Dump { from, count } => {
-                if busy {
+                // A dump asked for again (its Ack lost) replaces the one under way.
+                if self.state == State::Running {
                     refuse(ErrorCode::Busy, kind::DUMP)
                 } else if from > self.stored {
                     refuse(ErrorCode::OutOfRange, kind::DUMP)
