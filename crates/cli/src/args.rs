@@ -77,7 +77,7 @@ pub struct AcquireArgs {
     #[arg(long, value_name = "VOLTS", allow_hyphen_values = true)]
     pub voltage: f64,
     /// Test length [s].
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "S", allow_hyphen_values = true)]
     pub duration: f64,
     /// Sample rate [Hz].
     #[arg(long, value_name = "HZ", default_value_t = 1000)]

@@ -53,7 +53,19 @@ impl std::fmt::Display for BadInput {
 
 impl std::error::Error for BadInput {}
 
+/// Restores the default action of SIGPIPE (the Rust runtime ignores it), so that
+/// `motorid ... | head` ends quietly when the reader goes away, like other command-line tools,
+/// instead of failing to print.
+fn quiet_broken_pipe() {
+    #[cfg(unix)]
+    // SAFETY: setting a signal's disposition to SIG_DFL at start-up, before any thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 fn main() -> ExitCode {
+    quiet_broken_pipe();
     let cli = Cli::parse();
     let outcome = match cli.command {
         Command::Model(a) => commands::model::run(&a),

@@ -343,3 +343,111 @@ fn unusable_records_are_named_with_their_lines() {
         assert_bad_input(&refs, needle);
     }
 }
+
+/// The acquisition commands' bad input: one line, exit code 2.
+#[test]
+fn acquisition_options_are_checked() {
+    let dir = scratch("acquire-bad");
+    let out = dir.join("x.csv");
+    let o = out.to_str().unwrap();
+    let bad_cal = write(
+        &dir,
+        "cal.json",
+        b"{\"voltage\": [5, -5], \"current\": [0, 1], \"speed\": [0, 1], \"counts_per_rev\": 10}",
+    );
+    let typo_cal = write(&dir, "typo.json", b"{\"volts\": [0, 1]}");
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            vec![
+                "acquire",
+                "--port",
+                "/no/such/tty",
+                "--voltage",
+                "40",
+                "--duration",
+                "1",
+                "-o",
+                o,
+            ],
+            "--port /no/such/tty: cannot open",
+        ),
+        (
+            vec![
+                "acquire",
+                "--port",
+                "/no/such/tty",
+                "--voltage",
+                "40",
+                "--duration",
+                "-1",
+                "-o",
+                o,
+            ],
+            "--duration -1: expected a positive length",
+        ),
+        (
+            vec![
+                "acquire",
+                "--port",
+                "/no/such/tty",
+                "--voltage",
+                "40",
+                "--duration",
+                "1",
+                "--rate",
+                "20000",
+                "-o",
+                o,
+            ],
+            "--rate 20000: expected 1 to 10000 Hz",
+        ),
+        (
+            vec![
+                "acquire",
+                "--port",
+                "/no/such/tty",
+                "--voltage",
+                "40",
+                "--duration",
+                "1",
+                "--calibration",
+                bad_cal.to_str().unwrap(),
+                "-o",
+                o,
+            ],
+            "lo < hi",
+        ),
+        (
+            vec![
+                "acquire",
+                "--port",
+                "/no/such/tty",
+                "--voltage",
+                "40",
+                "--duration",
+                "1",
+                "--calibration",
+                typo_cal.to_str().unwrap(),
+                "-o",
+                o,
+            ],
+            "unknown field `volts`",
+        ),
+        (
+            vec!["emulate", "--pty", "--faults", "ber"],
+            "--faults: `ber` is not KEY=VALUE",
+        ),
+        (
+            vec!["emulate", "--pty", "--faults", "warp=1"],
+            "unknown key `warp`",
+        ),
+        (
+            vec!["emulate", "--pty", "--motor", "/no/such.json"],
+            "cannot read the file",
+        ),
+    ];
+    for (args, needle) in cases {
+        assert_bad_input(&args, needle);
+    }
+    assert!(!out.exists());
+}

@@ -1,92 +1,13 @@
 //! Prints the test vectors of docs/wire-format.md: `cargo run -p daq-protocol --example vectors`.
 
-use daq_protocol::{
-    encode, pack_sample, Command, ErrorCode, Frame, Mode, Reply, State, ALL_CHANNELS, MAX_FRAME,
-};
+#[path = "../tests/support/vectors.rs"]
+mod vectors;
+
+use daq_protocol::{encode, MAX_FRAME};
 
 fn main() {
-    let mut packed = [0u8; 11];
-    pack_sample(&mut packed, ALL_CHANNELS, 0, &[512, 100, 1023, 4095]);
-    pack_sample(&mut packed, ALL_CHANNELS, 1, &[0, 1, 2, 3]);
-    let vectors: Vec<(&str, Frame)> = vec![
-        (
-            "status",
-            Frame::Command {
-                seq: 0,
-                command: Command::Status,
-            },
-        ),
-        (
-            "configure",
-            Frame::Command {
-                seq: 1,
-                command: Command::Configure {
-                    rate_hz: 1000,
-                    channels: 15,
-                },
-            },
-        ),
-        (
-            "arm",
-            Frame::Command {
-                seq: 2,
-                command: Command::Arm {
-                    millivolts: 40_000,
-                    duration_ms: 50_000,
-                    mode: Mode::Record,
-                },
-            },
-        ),
-        (
-            "dump",
-            Frame::Command {
-                seq: 3,
-                command: Command::Dump { from: 0, count: 0 },
-            },
-        ),
-        (
-            "status_reply",
-            Frame::Reply {
-                seq: 0,
-                reply: Reply::Status {
-                    state: State::Idle,
-                    rate_hz: 1000,
-                    channels: 15,
-                    stored: 50_001,
-                },
-            },
-        ),
-        (
-            "samples",
-            Frame::Reply {
-                seq: 1,
-                reply: Reply::Samples {
-                    first: 0,
-                    channels: 15,
-                    count: 2,
-                    packed: &packed,
-                },
-            },
-        ),
-        (
-            "end",
-            Frame::Reply {
-                seq: 2,
-                reply: Reply::End { total: 50_001 },
-            },
-        ),
-        (
-            "error",
-            Frame::Reply {
-                seq: 3,
-                reply: Reply::Error {
-                    code: ErrorCode::Busy,
-                    command: 3,
-                },
-            },
-        ),
-    ];
-    for (name, frame) in vectors {
+    let packed = vectors::packed_example();
+    for (name, frame) in vectors::vectors(&packed) {
         let mut buf = [0u8; MAX_FRAME];
         let n = encode(&frame, &mut buf).expect("the vectors are valid frames");
         let hex: Vec<String> = buf[..n].iter().map(|b| format!("{b:02x}")).collect();
