@@ -12,6 +12,8 @@
 //! Every record must start with the motor at rest and no current (pre-trigger samples, or the
 //! first change of voltage at the first sample): the simulation starts from rest.
 
+use std::sync::atomic::{AtomicU64, Ordering};
+
 use motor_model::{central_difference, Effects, Input, MotorParams, Simulator};
 use nalgebra::{DMatrix, DVector};
 
@@ -133,7 +135,12 @@ struct OeRecord {
 struct OeProblem {
     records: Vec<OeRecord>,
     n_residuals: usize,
-    max_step_s: f64,
+    /// RK4 step \[s\] of every simulation (bits of an `f64`): fixed within an iteration of the
+    /// solver — set at each Jacobian from the parameters there, so that the base simulation,
+    /// its perturbations and the trial steps that follow share one discretisation — and
+    /// following the parameters from one iteration to the next (a start with a tiny L would
+    /// otherwise keep a tiny step, and a slow fit, to the end).
+    max_step_bits: AtomicU64,
 }
 
 /// `exp θ` as parameters, if representable.
@@ -145,6 +152,7 @@ fn values_of(theta: &[f64]) -> Option<[f64; 6]> {
 impl OeProblem {
     /// The problem of `records` (checked), simulated with RK4 steps of at most `max_step_s`.
     fn new(records: &[ExcitedRecord<'_>], max_step_s: f64) -> Result<Self, FitError> {
+        let max_step_bits = AtomicU64::new(max_step_s.to_bits());
         let records = records
             .iter()
             .enumerate()
@@ -158,8 +166,20 @@ impl OeProblem {
         Ok(OeProblem {
             records,
             n_residuals,
-            max_step_s,
+            max_step_bits,
         })
+    }
+
+    /// The RK4 step \[s\] in use.
+    fn max_step_s(&self) -> f64 {
+        f64::from_bits(self.max_step_bits.load(Ordering::Relaxed))
+    }
+
+    /// Uses the step that suits `values` from now on.
+    fn set_step_for(&self, values: [f64; 6]) {
+        if let Some(h) = step_for(values) {
+            self.max_step_bits.store(h.to_bits(), Ordering::Relaxed);
+        }
     }
 
     /// The simulated channels of every record at `values`: `[record][channel][kept sample]`.
@@ -168,7 +188,7 @@ impl OeProblem {
         let mut out = Vec::with_capacity(self.records.len());
         for rec in &self.records {
             let sim = Simulator::new(params, Effects::none(), rec.input.clone())
-                .and_then(|s| s.with_max_step(self.max_step_s))
+                .and_then(|s| s.with_max_step(self.max_step_s()))
                 .ok()?;
             let rate = 1.0 / rec.dt;
             // n samples: t = 0 … (n − 1) dt, half a period of slack against rounding.
@@ -214,6 +234,7 @@ impl OeProblem {
     /// Residuals and their Jacobian in θ (forward differences, the six perturbed simulations
     /// run in parallel).
     fn jacobian(&self, theta: &[f64]) -> Option<(Vec<f64>, DMatrix<f64>)> {
+        self.set_step_for(values_of(theta)?);
         let r0 = self.residuals(values_of(theta)?)?;
         let columns: Vec<Option<Vec<f64>>> = std::thread::scope(|scope| {
             let handles: Vec<_> = (0..6)
@@ -388,19 +409,23 @@ pub fn identify_output_error(
     if records.is_empty() {
         return Err(bad("records", "no record given".into()));
     }
-    let max_step_s = Simulator::new(
-        *start,
-        Effects::none(),
-        Input::Step {
-            volts: 1.0,
-            at_s: 0.0,
-        },
-    )
-    .map_err(|e| bad("start parameters", e.to_string()))?
-    .max_step_s()
-        * STEP_MARGIN;
+    let max_step_s =
+        step_for(start.values()).ok_or_else(|| bad("start parameters", "not simulable".into()))?;
     let mut problem = OeProblem::new(records, max_step_s)?;
     fit_weighted(&mut problem, start, settings)
+}
+
+/// The RK4 step \[s\] for parameters `values`: the simulator's own (1/40 of the fastest time
+/// constant) with a margin.
+fn step_for(values: [f64; 6]) -> Option<f64> {
+    let params = MotorParams::from_values(values).ok()?;
+    let step = Input::Step {
+        volts: 1.0,
+        at_s: 0.0,
+    };
+    Simulator::new(params, Effects::none(), step)
+        .ok()
+        .map(|s| s.max_step_s() * STEP_MARGIN)
 }
 
 /// Cut-offs tried by [`equation_error_start`], as fractions of the sample rate.
@@ -417,21 +442,13 @@ const START_CUTOFFS: [f64; 4] = [0.1, 0.02, 0.004, 0.0008];
 /// simulation fits the records best (output-error cost) is returned. Values the records cannot
 /// resolve (an L below one sample, no friction seen) are replaced by small positive ones.
 pub fn equation_error_start(records: &[ExcitedRecord<'_>]) -> Result<MotorParams, FitError> {
-    let mut problem = OeProblem::new(records, f64::INFINITY)?;
+    let problem = OeProblem::new(records, f64::INFINITY)?;
     let mut best: Option<(f64, MotorParams)> = None;
     let mut first_error = None;
     for fraction in START_CUTOFFS {
         match equation_error_estimate(records, fraction) {
             Ok(start) => {
-                problem.max_step_s = Simulator::new(
-                    start,
-                    Effects::none(),
-                    Input::Step {
-                        volts: 1.0,
-                        at_s: 0.0,
-                    },
-                )
-                .map_or(f64::INFINITY, |s| s.max_step_s());
+                problem.set_step_for(start.values());
                 let theta: Vec<f64> = start.values().iter().map(|v| v.ln()).collect();
                 let cost = problem.cost(&theta).unwrap_or(f64::INFINITY);
                 if best.as_ref().is_none_or(|(c, _)| cost < *c) {
