@@ -179,11 +179,6 @@ impl Loaded {
     }
 }
 
-/// Reads a record file. Every problem is a [`BadInput`] naming the file, the line and the value.
-pub fn read_file(path: &Path) -> Result<Record> {
-    Ok(read_loaded(path, &ColumnMap::default(), true)?.record)
-}
-
 /// Reads a record file whose columns `map` names; `voltage` may be absent when
 /// `need_voltage` is false (a current-driven axis). With a map, unmapped columns are ignored.
 pub fn read_mapped(path: &Path, map: &ColumnMap, need_voltage: bool) -> Result<Record> {

@@ -337,6 +337,18 @@ fn unusable_records_are_named_with_their_lines() {
             ],
             "has not settled".into(),
         ),
+        (
+            vec![
+                "identify".into(),
+                "--steady".into(),
+                p(&short_high),
+                "--resistance".into(),
+                "0.3".into(),
+                "--torque-constant".into(),
+                "0.15".into(),
+            ],
+            format!("{}:7-3007: the speed has not settled", p(&short_high)),
+        ),
     ];
     for (args, needle) in &cases {
         let refs: Vec<&str> = args.iter().map(String::as_str).collect();

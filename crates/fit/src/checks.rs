@@ -123,6 +123,24 @@ pub fn check_step_test(label: &str, t: &StepTest<'_>) -> Result<(), FitError> {
 /// Ωrm, Irb off the last samples): over the last tenth of `y`, the mean of its last fifth
 /// differs from the mean of its first fifth by less than [`SETTLED_FRACTION`] of the former.
 pub fn check_settled(label: &str, name: &str, y: &[f64], dt: f64) -> Result<(), FitError> {
+    check_settled_for(
+        label,
+        name,
+        y,
+        dt,
+        "the paper's method reads the steady state off the record's end — record longer (several mechanical time constants) or use --method full",
+    )
+}
+
+/// [`check_settled`] with the caller's `advice` (why a steady end is needed, what to do) at the
+/// end of the error.
+pub fn check_settled_for(
+    label: &str,
+    name: &str,
+    y: &[f64],
+    dt: f64,
+    advice: &str,
+) -> Result<(), FitError> {
     let n = y.len();
     let tail = (n / 10).max(5);
     let window = &y[n.saturating_sub(tail)..];
@@ -135,11 +153,14 @@ pub fn check_settled(label: &str, name: &str, y: &[f64], dt: f64) -> Result<(), 
     );
     let moved = (last - first).abs();
     if moved > SETTLED_FRACTION * last.abs() {
-        return Err(bad(label, format!(
-            "the {name} has not settled: it still moves by {:.1} % over the last {:.3} s; the paper's method reads the steady state off the record's end — record longer (several mechanical time constants) or use --method full",
+        return Err(bad(
+            label,
+            format!(
+            "the {name} has not settled: it still moves by {:.1} % over the last {:.3} s; {advice}",
             100.0 * moved / last.abs().max(f64::MIN_POSITIVE),
             tail as f64 * dt
-        )));
+        ),
+        ));
     }
     Ok(())
 }

@@ -39,7 +39,9 @@ mod stats;
 mod steady_fit;
 mod step_location;
 
-pub use checks::{check_settled, check_step_test, MIN_SAMPLES, SETTLED_FRACTION};
+pub use checks::{
+    check_settled, check_settled_for, check_step_test, MIN_SAMPLES, SETTLED_FRACTION,
+};
 pub use clipping::{find_clipping, MIN_CLIPPED_RUN};
 pub use error::FitError;
 pub use full_model::{

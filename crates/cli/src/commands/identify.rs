@@ -13,7 +13,7 @@ use motor_model::{central_difference, Derived, Input, Record};
 use serde_json::{json, Value};
 
 use crate::args::{AxisArg, DriveArg, IdentifyArgs, MethodArg};
-use crate::record_csv::{read_file, read_loaded, read_mapped, ColumnMap, Loaded};
+use crate::record_csv::{read_loaded, read_mapped, ColumnMap, Loaded};
 use crate::{BadInput, NotConverged};
 
 /// A 95 % interval wider than this fraction of the value marks a poorly determined parameter.
@@ -328,7 +328,25 @@ fn run_steady(a: &IdentifyArgs) -> Result<()> {
     };
     let mut tests = Vec::new();
     for path in &a.steady {
-        let cols = read_file(path)?;
+        let loaded = read_loaded(path, &column_map(a)?, true)?;
+        let cols = &loaded.record;
+        let dt = (cols.t[cols.t.len() - 1] - cols.t[0]) / (cols.t.len() - 1) as f64;
+        // The current alone can look steady at its peak: check the speed too where it is
+        // recorded.
+        let label = file_lines(&path.display().to_string(), &loaded.lines);
+        let speed = match (&cols.position, &cols.speed) {
+            (Some(p), _) => Some(central_difference(&cols.t, p)),
+            (None, Some(w)) => Some(w.clone()),
+            (None, None) => None,
+        };
+        let advice =
+            "Eq. (8) needs the steady state — record longer (several mechanical time constants)";
+        fit::check_settled_for(&label, "current", &cols.current, dt, advice)
+            .and_then(|()| match &speed {
+                Some(w) => fit::check_settled_for(&label, "speed", w, dt, advice),
+                None => Ok(()),
+            })
+            .map_err(|e| BadInput(e.to_string()))?;
         // Steady values: medians of the last tenth of the record.
         let tail = |v: &[f64]| {
             let mut t = v[v.len() - (v.len() / 10).max(1)..].to_vec();
