@@ -235,8 +235,19 @@ pub struct Acquired {
 
 /// The logger's refusal of `what`.
 fn refused<T>(what: &str, code: ErrorCode) -> Result<T, AcquireError> {
+    let why = match code {
+        ErrorCode::Busy => "busy with another test or dump (stop it, or wait)",
+        ErrorCode::BadSetting => {
+            "a setting is out of range (rate 1–10,000 Hz, a non-zero duration of at least 1 ms)"
+        }
+        ErrorCode::FlashFull => {
+            "the record does not fit in the 16 Mbit flash (6 bytes a sample: at most 349,525 samples; shorten the test or lower the rate)"
+        }
+        ErrorCode::OutOfRange => "it asked for samples past the end of the record",
+        ErrorCode::BadFrame => "the command arrived damaged",
+    };
     Err(AcquireError::Refused(format!(
-        "the logger refused {what}: {code:?}"
+        "the logger refused {what}: {why}"
     )))
 }
 
