@@ -513,6 +513,7 @@ fn emps_real_data_matches_the_published_reference() {
         eprintln!("skipped: {path} is not on this machine");
         return;
     }
+    let plots = scratch("emps-identify-plot");
     let out = motorid(&[
         "identify",
         "--input",
@@ -526,8 +527,18 @@ fn emps_real_data_matches_the_published_reference() {
         "--axis",
         "linear",
         "--json",
+        "--plot",
+        plots.to_str().unwrap(),
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
+    // The measured and model force with the residual beneath, as SVG and PNG.
+    for ext in ["svg", "png"] {
+        let figure = plots.join(format!("DATA_EMPS_inverse_model.{ext}"));
+        assert!(
+            std::fs::metadata(&figure).unwrap().len() > 10_000,
+            "{figure:?}"
+        );
+    }
     let v: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
     for (name, reference, unit) in [
         ("J", 95.1089, "kg"),

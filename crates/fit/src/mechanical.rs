@@ -57,6 +57,22 @@ pub struct MechanicalFit {
     pub residual_rms: f64,
     /// `100 (1 − ‖τ − Φθ‖/‖τ − τ̄‖)` \[%\].
     pub nrmse_fit_percent: f64,
+    /// The fitted samples: torque as measured and as the model gives it, both low-passed and
+    /// decimated as in the fit (torque unit).
+    pub fitted: FittedTorque,
+}
+
+/// The torque the inverse model was fitted to, and its model, on the decimated grid.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct FittedTorque {
+    /// Time of the first fitted sample from the record's first sample \[s\].
+    pub t0_s: f64,
+    /// Their spacing \[s\] (the sample period times the decimation).
+    pub dt_s: f64,
+    /// Measured (filtered) torque.
+    pub measured: Vec<f64>,
+    /// `Φθ`: the model's torque.
+    pub model: Vec<f64>,
 }
 
 /// Identifies `[J, f, Ts, offset]` from the motor torque (or force) `torque` and the position
@@ -152,7 +168,14 @@ pub fn identify_inverse_model(
         .cholesky()
         .map(|c| c.solve(&jtb))
         .ok_or_else(|| bad("record", "the regressors are collinear: the motion does not excite J, f, Ts and the offset separately (use a richer trajectory)".into()))?;
-    let residual = &a * &theta - &b;
+    let model = &a * &theta;
+    let fitted = FittedTorque {
+        t0_s: rows.start as f64 * k as f64 * dt,
+        dt_s: k as f64 * dt,
+        measured: b.iter().copied().collect(),
+        model: model.iter().copied().collect(),
+    };
+    let residual = model - &b;
     let sse = residual.norm_squared();
     let mean = b.mean();
     let sst = b.iter().map(|v| (v - mean).powi(2)).sum::<f64>();
@@ -182,6 +205,7 @@ pub fn identify_inverse_model(
         } else {
             f64::NAN
         },
+        fitted,
     })
 }
 

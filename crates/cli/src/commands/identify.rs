@@ -485,6 +485,63 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
         AxisArg::Rotary => ["kg·m²", "N·m·s/rad", "N·m", "N·m"],
         AxisArg::Linear => ["kg", "N·s/m", "N", "N"],
     };
+    if let Some(dir) = &a.plot {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
+        let f = &fit.fitted;
+        let t: Vec<f64> = (0..f.measured.len())
+            .map(|j| rec.t[0] + f.t0_s + j as f64 * f.dt_s)
+            .collect();
+        let residual: Vec<f64> = f
+            .measured
+            .iter()
+            .zip(&f.model)
+            .map(|(y, m)| y - m)
+            .collect();
+        let (torque_label, residual_label) = match a.axis {
+            AxisArg::Rotary => ("torque k·I [N·m]", "torque residual [N·m]"),
+            AxisArg::Linear => ("force k·I [N]", "force residual [N]"),
+        };
+        let name = path
+            .file_stem()
+            .map_or_else(|| "record".into(), |s| s.to_string_lossy().into_owned());
+        let panels = [
+            crate::plot::Panel {
+                y_label: torque_label,
+                series: vec![
+                    crate::plot::Series {
+                        label: "measured (filtered, decimated)",
+                        values: &f.measured,
+                        color: crate::plot::MEASURED,
+                    },
+                    crate::plot::Series {
+                        label: "J q'' + f q' + Ts sign(q') + offset",
+                        values: &f.model,
+                        color: crate::plot::MODEL,
+                    },
+                ],
+            },
+            crate::plot::Panel {
+                y_label: residual_label,
+                series: vec![crate::plot::Series {
+                    label: "measured - model",
+                    values: &residual,
+                    color: crate::plot::OTHER,
+                }],
+            },
+        ];
+        let written = crate::plot::time_series(
+            &dir.join(format!("{name}_inverse_model")),
+            &format!("{shown}: inverse model of the current-driven axis"),
+            &t,
+            &panels,
+        )?;
+        if !a.quiet {
+            for p in written {
+                eprintln!("wrote {}", p.display());
+            }
+        }
+    }
     if a.json {
         let mut parameters = serde_json::Map::new();
         for i in 0..4 {
