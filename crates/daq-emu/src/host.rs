@@ -14,7 +14,6 @@ use std::time::{Duration, Instant};
 
 use motor_model::{
     Adc as AdcModel, Effects, Input, MeasurementModel, ModelError, MotorParams, Range, Readings,
-    SpeedSource,
 };
 use serde::{Deserialize, Serialize};
 
@@ -75,16 +74,13 @@ impl Calibration {
     /// The measurement chain of this calibration with `noise_lsb` of ADC noise and `seed`: the
     /// settings under which `motorid simulate` gives the logger's records.
     pub fn measurement(&self, noise_lsb: f64, seed: u64) -> Result<MeasurementModel, ModelError> {
-        let adc = AdcModel { bits: 10 };
-        let ranges = self.ranges()?;
-        Ok(MeasurementModel {
-            adc: Some(adc),
-            ranges: ranges.map(Some),
-            noise_std: ranges.map(|r| noise_lsb * adc.lsb(r)),
-            encoder_counts_per_rev: Some(self.counts_per_rev),
-            speed_source: SpeedSource::Encoder,
+        Ok(MeasurementModel::logger(
+            10,
+            self.ranges()?,
+            noise_lsb,
+            self.counts_per_rev,
             seed,
-        })
+        ))
     }
 }
 

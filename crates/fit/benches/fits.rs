@@ -7,7 +7,7 @@ use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use fit::{fit_33, identify_full, identify_paper, LmSettings, Params33, Record33, StepTest};
-use motor_model::{Adc, MeasurementModel, MotorParams, Range, SpeedSource, StepResponse};
+use motor_model::{MeasurementModel, MotorParams, StepResponse};
 
 struct Rec {
     volts: f64,
@@ -30,17 +30,9 @@ fn record(volts: f64, rate: f64, logger: bool, seed: u64) -> Rec {
             position: None,
         };
     }
-    let adc = Adc { bits: 10 };
-    let ranges = [&trace.voltage, &trace.current, &trace.speed].map(|v| Range::covering(v));
-    let m = MeasurementModel {
-        adc: Some(adc),
-        ranges: ranges.map(Some),
-        noise_std: ranges.map(|r| adc.lsb(r)),
-        encoder_counts_per_rev: Some(2000),
-        speed_source: SpeedSource::Encoder,
-        seed,
-    };
-    let r = m.apply(&trace).unwrap();
+    let r = MeasurementModel::paper_logger(&trace, seed)
+        .apply(&trace)
+        .unwrap();
     Rec {
         volts,
         current: r.current,

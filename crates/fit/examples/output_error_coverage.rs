@@ -2,9 +2,7 @@
 //! `cargo run --release -p fit --example output_error_coverage [RUNS]` prints each run's
 //! relative errors and how many 95 % intervals contained the truth.
 use fit::{equation_error_start, identify_output_error, voltage_input, ExcitedRecord, LmSettings};
-use motor_model::{
-    Adc, Effects, Input, MeasurementModel, MotorParams, Range, Simulator, SpeedSource,
-};
+use motor_model::{Effects, Input, MeasurementModel, MotorParams, Simulator};
 fn main() {
     let truth = MotorParams::paper();
     let u = Input::piecewise(&[(0.5, 40.0), (40.5, -20.0), (80.5, 0.0), (100.5, 2.5)]).unwrap();
@@ -18,18 +16,9 @@ fn main() {
         .and_then(|a| a.parse().ok())
         .unwrap_or(20);
     for seed in 0..runs {
-        let adc = Adc { bits: 10 };
-        let ranges = [&trace.voltage, &trace.current, &trace.speed].map(|s| Range::covering(s));
-        let rec = MeasurementModel {
-            adc: Some(adc),
-            ranges: ranges.map(Some),
-            noise_std: ranges.map(|r| adc.lsb(r)),
-            encoder_counts_per_rev: Some(2000),
-            speed_source: SpeedSource::Encoder,
-            seed,
-        }
-        .apply(&trace)
-        .unwrap();
+        let rec = MeasurementModel::paper_logger(&trace, seed)
+            .apply(&trace)
+            .unwrap();
         let input = voltage_input(&rec.t, &rec.voltage).unwrap();
         let r = [ExcitedRecord {
             input: &input,

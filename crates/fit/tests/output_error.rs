@@ -4,25 +4,14 @@ use fit::{
     equation_error_start, identify_output_error, voltage_input, ExcitedRecord, LmSettings,
     PARAM_NAMES,
 };
-use motor_model::{
-    Adc, Effects, Input, MeasurementModel, MotorParams, Range, Record, Simulator, SpeedSource,
-};
+use motor_model::{Effects, Input, MeasurementModel, MotorParams, Record, Simulator, SpeedSource};
 
 /// The paper's logger: 10-bit ADC over ranges covering the signals, 1 LSB of noise, a
 /// 2000-count encoder for the speed.
 fn logger(trace: &motor_model::Trace, seed: u64) -> Record {
-    let adc = Adc { bits: 10 };
-    let ranges = [&trace.voltage, &trace.current, &trace.speed].map(|s| Range::covering(s));
-    MeasurementModel {
-        adc: Some(adc),
-        ranges: ranges.map(Some),
-        noise_std: ranges.map(|r| adc.lsb(r)),
-        encoder_counts_per_rev: Some(2000),
-        speed_source: SpeedSource::Encoder,
-        seed,
-    }
-    .apply(trace)
-    .unwrap()
+    MeasurementModel::paper_logger(trace, seed)
+        .apply(trace)
+        .unwrap()
 }
 
 /// A staircase with a reversal, a coast to standstill and a low-voltage breakaway.

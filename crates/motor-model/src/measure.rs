@@ -148,6 +148,36 @@ pub struct Record {
 }
 
 impl MeasurementModel {
+    /// A data logger: a `bits`-bit ADC over `ranges` (voltage \[V\], current \[A\], tachometer
+    /// \[rad/s\]) with `noise_lsb` LSB of white noise on each analog channel, an encoder of
+    /// `counts_per_rev` counts, and the speed from the encoder (as the paper's logger, whose
+    /// tachometer was too noisy).
+    pub fn logger(
+        bits: u8,
+        ranges: [Range; 3],
+        noise_lsb: f64,
+        counts_per_rev: u32,
+        seed: u64,
+    ) -> Self {
+        let adc = Adc { bits };
+        MeasurementModel {
+            adc: Some(adc),
+            ranges: ranges.map(Some),
+            noise_std: ranges.map(|r| noise_lsb * adc.lsb(r)),
+            encoder_counts_per_rev: Some(counts_per_rev),
+            speed_source: SpeedSource::Encoder,
+            seed,
+        }
+    }
+
+    /// The paper's logger on `trace`: [`MeasurementModel::logger`] with a 10-bit ADC over ranges
+    /// covering the trace's signals ([`Range::covering`]), 1 LSB of noise and a 2000-count
+    /// encoder.
+    pub fn paper_logger(trace: &Trace, seed: u64) -> Self {
+        let ranges = [&trace.voltage, &trace.current, &trace.speed].map(|s| Range::covering(s));
+        Self::logger(10, ranges, 1.0, 2000, seed)
+    }
+
     /// Measures `trace` through this chain.
     pub fn apply(&self, trace: &Trace) -> Result<Record, ModelError> {
         for (name, s) in ["voltage", "current", "speed"].iter().zip(self.noise_std) {
@@ -337,14 +367,7 @@ mod readings_tests {
             Range::new(-200.0, 200.0).unwrap(),
             Range::new(-250.0, 250.0).unwrap(),
         ];
-        let model = MeasurementModel {
-            adc: Some(adc),
-            ranges: ranges.map(Some),
-            noise_std: ranges.map(|r| adc.lsb(r)),
-            encoder_counts_per_rev: Some(2000),
-            speed_source: SpeedSource::Encoder,
-            seed: 7,
-        };
+        let model = MeasurementModel::logger(10, ranges, 1.0, 2000, 7);
         let record = model.apply(&trace).unwrap();
         let readings = model.readings(&trace).unwrap();
         let back = |c: usize| -> Vec<f64> {
