@@ -43,7 +43,8 @@ pub use axis::{simulate_pd_axis, AxisParams, PdController};
 pub use derived::{Derived, Regime};
 pub use error::ModelError;
 pub use measure::{
-    central_difference, Adc, MeasurementModel, NoiseRng, Range, Readings, Record, SpeedSource,
+    central_difference, mean_period, Adc, MeasurementModel, NoiseRng, Range, Readings, Record,
+    SpeedSource,
 };
 pub use params::MotorParams;
 pub use real::{Dual, Real};

@@ -292,6 +292,15 @@ impl MeasurementModel {
     }
 }
 
+/// Mean sample period of `t` \[s\]: `(t_last − t_first)/(n − 1)`; NaN with fewer than two
+/// samples.
+pub fn mean_period(t: &[f64]) -> f64 {
+    match (t.first(), t.last()) {
+        (Some(first), Some(last)) if t.len() > 1 => (last - first) / (t.len() - 1) as f64,
+        _ => f64::NAN,
+    }
+}
+
 /// Derivative of `y` over `t` by central differences (one-sided at the ends) \[unit of y / s\].
 pub fn central_difference(t: &[f64], y: &[f64]) -> Vec<f64> {
     let n = t.len().min(y.len());

@@ -64,7 +64,7 @@ pub fn run(a: &EmpsArgs) -> Result<()> {
         val_path.display().to_string(),
     );
     let t = column(&est, "time_s", &est_name)?;
-    let dt = (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64;
+    let dt = motor_model::mean_period(t);
     let force: Vec<f64> = column(&est, "vir_controller_output_V", &est_name)?
         .iter()
         .map(|v| DRIVE_GAIN_N_PER_V * v)

@@ -32,7 +32,7 @@ pub fn fit_figures(
     for rec in records {
         let r = &rec.record;
         let n = r.t.len();
-        let rate = 1.0 / ((r.t[n - 1] - r.t[0]) / (n - 1) as f64);
+        let rate = 1.0 / motor_model::mean_period(&r.t);
         let trace = Simulator::new(*params, Effects::none(), rec.input.clone())
             .and_then(|s| s.run((n as f64 - 0.5) / rate, rate))
             .map_err(|e| anyhow::anyhow!("{}: simulating the fitted model: {e}", rec.path))?;

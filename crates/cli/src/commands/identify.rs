@@ -330,7 +330,7 @@ fn run_steady(a: &IdentifyArgs) -> Result<()> {
     for path in &a.steady {
         let loaded = read_loaded(path, &column_map(a)?, true)?;
         let cols = &loaded.record;
-        let dt = (cols.t[cols.t.len() - 1] - cols.t[0]) / (cols.t.len() - 1) as f64;
+        let dt = motor_model::mean_period(&cols.t);
         // The current alone can look steady at its peak: check the speed too where it is
         // recorded.
         let label = file_lines(&path.display().to_string(), &loaded.lines);
@@ -440,12 +440,7 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
     let position = rec.position.as_ref().ok_or_else(|| {
         BadInput(format!("{shown}: no position column: --input current fits J, f, Ts from the position (map it with --columns position=HEADER)"))
     })?;
-    let n = rec.t.len();
-    let dt = if n > 1 {
-        (rec.t[n - 1] - rec.t[0]) / (n - 1) as f64
-    } else {
-        f64::NAN
-    };
+    let dt = motor_model::mean_period(&rec.t);
     // The torque constant: given, or from the voltage equation (2a) when the armature voltage
     // is recorded.
     let (k, k_source) = match a.torque_constant {
@@ -698,7 +693,7 @@ pub fn load_excited(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedE
         ))
         .into());
     }
-    let dt = (rec.t[rec.t.len() - 1] - rec.t[0]) / (rec.t.len() - 1) as f64;
+    let dt = motor_model::mean_period(&rec.t);
     Ok(LoadedExcited {
         path: shown,
         label,
