@@ -10,12 +10,14 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Result;
-use fit::{equation_error_start, identify_output_error, FullFit, LmSettings, PARAM_NAMES};
+use fit::{FullFit, PARAM_NAMES};
 use motor_model::MotorParams;
 use serde_json::{json, Value};
 
 use crate::args::{IdentifyArgs, MethodArg};
-use crate::commands::identify::{identify_pair, load_excited, load_step, LoadedExcited};
+use crate::commands::identify::{
+    fit_excited, identify_pair, load_excited, load_step, LoadedExcited,
+};
 use crate::record_csv::{write_atomically, ColumnMap};
 use crate::{parallel, settings, BadInput, NotConverged};
 
@@ -96,11 +98,7 @@ fn identify_folder(folder: &Path) -> Row {
                 .iter()
                 .map(|p| load_excited(p, &ColumnMap::default(), true))
                 .collect::<Result<Vec<LoadedExcited>>>()?;
-            let records: Vec<_> = loaded.iter().map(LoadedExcited::excited).collect();
-            let start = equation_error_start(&records)
-                .map_err(|e| BadInput(format!("{}: {e}", folder.display())))?;
-            identify_output_error(&records, &start, LmSettings::default())
-                .map_err(|e| BadInput(format!("{}: {e}", folder.display())).into())
+            fit_excited(&loaded, None, &folder.display().to_string(), "").map(|(_, fit)| fit)
         })();
         ("output_error", fitted)
     };

@@ -9,7 +9,7 @@ use fit::{
     voltage_input, ExcitedRecord, FullFit, InverseModelSettings, LmSettings, PaperIdentification,
     StepTest, MECHANICAL_NAMES, PARAM_NAMES, PARAM_UNITS,
 };
-use motor_model::{central_difference, Derived, Input, Record};
+use motor_model::{central_difference, Derived, Input, MotorParams, Record};
 use serde_json::{json, Value};
 
 use crate::args::{AxisArg, DriveArg, IdentifyArgs, MethodArg};
@@ -718,6 +718,26 @@ pub fn file_lines(shown: &str, lines: &[usize]) -> String {
     )
 }
 
+/// The output-error fit of `loaded` from `start`, or from the equation-error start when none is
+/// given; errors name `label`, and a failed start adds `start_hint`. Returns the start used and
+/// the fit.
+pub fn fit_excited(
+    loaded: &[LoadedExcited],
+    start: Option<MotorParams>,
+    label: &str,
+    start_hint: &str,
+) -> Result<(MotorParams, FullFit)> {
+    let records: Vec<ExcitedRecord> = loaded.iter().map(LoadedExcited::excited).collect();
+    let start = match start {
+        Some(s) => s,
+        None => equation_error_start(&records)
+            .map_err(|e| BadInput(format!("{label}: {e}{start_hint}")))?,
+    };
+    let full = identify_output_error(&records, &start, LmSettings::default())
+        .map_err(|e| BadInput(format!("{label}: {e}")))?;
+    Ok((start, full))
+}
+
 /// `--record A.csv --record B.csv ...`: all six parameters by output error.
 fn run_records(a: &IdentifyArgs) -> Result<()> {
     let map = column_map(a)?;
@@ -732,12 +752,7 @@ fn run_records(a: &IdentifyArgs) -> Result<()> {
         .map(|l| l.label.as_str())
         .collect::<Vec<_>>()
         .join(" / ");
-    let records: Vec<ExcitedRecord> = loaded.iter().map(LoadedExcited::excited).collect();
-    let start = match &a.start {
-        Some(spec) => crate::settings::motor(spec)?,
-        None => equation_error_start(&records)
-            .map_err(|e| BadInput(format!("{all}: {e} (give a start with --start FILE.json)")))?,
-    };
+    let given = a.start.as_deref().map(crate::settings::motor).transpose()?;
     let samples: usize = loaded.iter().map(|l| l.record.t.len()).sum();
     let clock = std::time::Instant::now();
     if !a.quiet {
@@ -746,8 +761,12 @@ fn run_records(a: &IdentifyArgs) -> Result<()> {
             loaded.len()
         );
     }
-    let full = identify_output_error(&records, &start, LmSettings::default())
-        .map_err(|e| BadInput(format!("{all}: {e}")))?;
+    let (start, full) = fit_excited(
+        &loaded,
+        given,
+        &all,
+        " (give a start with --start FILE.json)",
+    )?;
     if !a.quiet {
         eprintln!(
             "done in {:.1} s ({} iterations)",
