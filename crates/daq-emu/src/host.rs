@@ -362,9 +362,7 @@ impl Emulator {
         let start = Instant::now();
         loop {
             self.firmware.poll(&mut self.board);
-            let idle =
-                self.firmware.is_quiet() && self.board.rx.is_empty() && self.board.ticks_left == 0;
-            if idle || start.elapsed() >= budget {
+            if self.is_idle() || start.elapsed() >= budget {
                 break;
             }
             if self.board.paced.is_some() && self.board.tx.len() > 4096 {
