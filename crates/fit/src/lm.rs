@@ -48,17 +48,26 @@ pub trait LeastSquares {
 
 /// Why the solver stopped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum Termination {
     /// Relative cost reduction (achieved by the last step, or predicted for the next one) below
     /// `ftol`, or relative step (the last one taken, or the next Gauss–Newton one) below `xtol`.
     Converged,
     /// Gradient `‖Jᵀr‖∞` below `gtol` (an exact fit).
     ZeroGradient,
+    /// No step lowered the cost even with the largest damping, and the local model promised a
+    /// gain below √ε of the cost: rounding in the summed cost is what stops progress, so the fit
+    /// is at its optimum to working precision (MINPACK's `info = 6`/`7`; rust-cv's
+    /// `NoImprovementPossible`).
+    NoImprovementPossible,
     /// No step lowered the cost even with the largest damping, although the local model
     /// promised a gain larger than √ε of the cost: the model and the data disagree there.
     Stalled,
     /// The iteration budget ran out before convergence.
     MaxIterations,
+    /// The budget of model evaluations (accepted and rejected trial steps together,
+    /// [`LmSettings::max_evaluations`]) ran out before convergence.
+    MaxEvaluations,
     /// The residuals or Jacobian became non-finite at the start.
     NonFinite,
 }
@@ -66,7 +75,10 @@ pub enum Termination {
 impl Termination {
     /// Whether this counts as a converged fit.
     pub fn converged(self) -> bool {
-        matches!(self, Termination::Converged | Termination::ZeroGradient)
+        matches!(
+            self,
+            Termination::Converged | Termination::ZeroGradient | Termination::NoImprovementPossible
+        )
     }
 
     /// Text for reports.
@@ -74,8 +86,12 @@ impl Termination {
         match self {
             Termination::Converged => "converged",
             Termination::ZeroGradient => "converged (zero gradient)",
+            Termination::NoImprovementPossible => {
+                "converged to working precision (no step lowers the cost further)"
+            }
             Termination::Stalled => "stalled (no step lowers the cost)",
             Termination::MaxIterations => "maximum iterations reached",
+            Termination::MaxEvaluations => "maximum model evaluations reached",
             Termination::NonFinite => "non-finite residuals",
         }
     }
@@ -92,6 +108,9 @@ pub struct LmSettings {
     pub gtol: f64,
     /// Maximum accepted iterations.
     pub max_iters: u64,
+    /// Maximum evaluations of the model (each trial step, accepted or rejected, and each
+    /// Jacobian count one): bounds the work of a fit whose steps keep being rejected.
+    pub max_evaluations: u64,
     /// Initial damping λ.
     pub lambda_start: f64,
     /// Evaluate the first trial step with its normal equations at once (one pass over the data
@@ -109,6 +128,9 @@ impl Default for LmSettings {
             xtol: 1e-10,
             gtol: 0.0,
             max_iters: 200,
+            // 200 iterations of about five evaluations each: a fit that needs more is not
+            // converging.
+            max_evaluations: 1000,
             lambda_start: 1e-3,
             optimistic_start: false,
         }
@@ -131,6 +153,13 @@ impl LmSettings {
                     expected: "a finite value of zero or more",
                 });
             }
+        }
+        if self.max_evaluations == 0 {
+            return Err(FitError::InvalidSetting {
+                name: "max_evaluations",
+                value: 0.0,
+                expected: "at least one evaluation",
+            });
         }
         if self.max_iters == 0 {
             return Err(FitError::InvalidSetting {
@@ -196,6 +225,8 @@ pub struct LevenbergMarquardt {
     /// normal equations at once (one pass over the data instead of two when it is accepted
     /// again, the usual case near the solution).
     last_accepted: bool,
+    /// Model evaluations so far (cost or normal equations).
+    evaluations: u64,
     stop: Option<Termination>,
 }
 
@@ -210,6 +241,7 @@ impl LevenbergMarquardt {
             last_step_rel: f64::INFINITY,
             last_cost_rel: f64::INFINITY,
             last_accepted: settings.optimistic_start,
+            evaluations: 0,
             stop: None,
         })
     }
@@ -292,6 +324,10 @@ impl<P: LeastSquares> Solver<ArgminProblem<'_, P>, LmState> for LevenbergMarquar
         }
         let diag_max = (0..n).map(|i| normal.jtj[(i, i)]).fold(0.0_f64, f64::max);
         loop {
+            if self.evaluations >= self.settings.max_evaluations {
+                self.stop = Some(Termination::MaxEvaluations);
+                return Ok((state, None));
+            }
             let mut a = normal.jtj.clone();
             for i in 0..n {
                 let d = normal.jtj[(i, i)]
@@ -304,11 +340,13 @@ impl<P: LeastSquares> Solver<ArgminProblem<'_, P>, LmState> for LevenbergMarquar
                 let trial: Vec<f64> = p.iter().zip(delta.iter()).map(|(a, b)| a + b).collect();
                 // Optimistic: after an accepted step, evaluate the trial's normal equations
                 // directly; otherwise screen it with the cheaper cost first.
+                self.evaluations += 1;
                 let trial_normal = if self.last_accepted {
                     problem
                         .gradient(&trial)?
                         .filter(|tn| finite_normal(tn) && tn.cost < cost)
                 } else if problem.cost(&trial)? < cost {
+                    self.evaluations += 1;
                     problem.gradient(&trial)?.filter(finite_normal)
                 } else {
                     None
@@ -331,7 +369,7 @@ impl<P: LeastSquares> Solver<ArgminProblem<'_, P>, LmState> for LevenbergMarquar
                 // precision. Otherwise the model and the data disagree: a genuine stall.
                 let at_precision = predicted.is_some_and(|p| p <= STALL_PRECISION * cost);
                 self.stop = Some(if at_precision {
-                    Termination::Converged
+                    Termination::NoImprovementPossible
                 } else {
                     Termination::Stalled
                 });
@@ -343,9 +381,7 @@ impl<P: LeastSquares> Solver<ArgminProblem<'_, P>, LmState> for LevenbergMarquar
     fn terminate(&mut self, state: &LmState) -> TerminationStatus {
         if let Some(stop) = self.stop {
             return TerminationStatus::Terminated(match stop {
-                Termination::Converged | Termination::ZeroGradient => {
-                    TerminationReason::SolverConverged
-                }
+                t if t.converged() => TerminationReason::SolverConverged,
                 other => TerminationReason::SolverExit(other.text().to_string()),
             });
         }

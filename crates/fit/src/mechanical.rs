@@ -28,6 +28,11 @@ pub struct InverseModelSettings {
     pub position_filter_order: usize,
     /// Decimation factor of the parallel filtering (1 = none).
     pub decimation: usize,
+    /// Whether the constant offset (a constant load torque, or a drive's current offset) is
+    /// fitted. When the axis moves in one direction only, `sign(q̇)` is constant and the offset
+    /// cannot be told from Ts: fixing it at 0 leaves Ts to carry any constant load. A
+    /// voltage-driven motor's own torque `k I` has no offset (Eq. (2b)).
+    pub fit_offset: bool,
 }
 
 impl Default for InverseModelSettings {
@@ -37,6 +42,7 @@ impl Default for InverseModelSettings {
             position_cutoff_hz: 100.0,
             position_filter_order: 4,
             decimation: 10,
+            fit_offset: true,
         }
     }
 }
@@ -45,11 +51,11 @@ impl Default for InverseModelSettings {
 /// kg·m², N·m·s/rad, N·m, N·m; for a linear one kg, N·s/m, N, N).
 #[derive(Debug, Clone, PartialEq)]
 pub struct MechanicalFit {
-    /// `[J, f, Ts, offset]`.
+    /// `[J, f, Ts, offset]` (offset exactly 0 when it is not fitted).
     pub values: [f64; 4],
     /// 95 % intervals (Student t on the least-squares covariance, as `nlparci`).
     pub ci95: Option<[[f64; 2]; 4]>,
-    /// Correlation matrix (4 × 4).
+    /// Correlation matrix (4 × 4, or 3 × 3 of J, f, Ts when the offset is fixed).
     pub correlation: Option<DMatrix<f64>>,
     /// Samples used after decimation.
     pub samples: usize,
@@ -133,7 +139,7 @@ pub fn identify_inverse_model(
             "the axis never moves: nothing to identify".into(),
         ));
     }
-    let columns = [
+    let mut columns = vec![
         qdd,
         qd.clone(),
         qd.iter()
@@ -147,8 +153,11 @@ pub fn identify_inverse_model(
                 }
             })
             .collect(),
-        vec![1.0; n],
     ];
+    if settings.fit_offset {
+        columns.push(vec![1.0; n]);
+    }
+    let p = columns.len();
     let k = settings.decimation.max(1);
     let y = decimate(torque, k)?;
     let phi: Vec<Vec<f64>> = columns
@@ -159,7 +168,7 @@ pub fn identify_inverse_model(
     let edge = 10.min(y.len() / 4);
     let rows = edge..y.len() - edge;
     let m = rows.len();
-    let a = DMatrix::from_fn(m, 4, |i, j| phi[j][rows.start + i]);
+    let a = DMatrix::from_fn(m, p, |i, j| phi[j][rows.start + i]);
     let b = DVector::from_iterator(m, rows.clone().map(|i| y[i]));
     let jtj = a.transpose() * &a;
     let jtb = a.transpose() * &b;
@@ -186,15 +195,15 @@ pub fn identify_inverse_model(
         n_residuals: m,
     };
     let unc = uncertainty(&normal);
-    let values = [theta[0], theta[1], theta[2], theta[3]];
+    // A fixed offset is exactly 0, its interval [0, 0].
+    let values: [f64; 4] = std::array::from_fn(|i| theta.get(i).copied().unwrap_or(0.0));
+    let half = |u: &crate::stats::Uncertainty, i: usize| u.ci95_half_width.get(i).copied();
     Ok(MechanicalFit {
         values,
         ci95: unc.as_ref().map(|u| {
             std::array::from_fn(|i| {
-                [
-                    values[i] - u.ci95_half_width[i],
-                    values[i] + u.ci95_half_width[i],
-                ]
+                let h = half(u, i).unwrap_or(0.0);
+                [values[i] - h, values[i] + h]
             })
         }),
         correlation: unc.map(|u| u.correlation),

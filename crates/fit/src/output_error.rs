@@ -578,6 +578,9 @@ fn equation_error_estimate(
             position_cutoff_hz: 0.2 * fraction / dt,
             position_filter_order: 4,
             decimation: 5,
+            // Eq. (2b) has no offset; with one, a record that never reverses cannot tell it
+            // from Ts (a 40 V step gave Ts = 2443 N·m against an offset of −2443 N·m).
+            fit_offset: false,
         };
         if let Ok(m) = identify_inverse_model(*dt, &torque, position, settings) {
             let w = rec.current.len() as f64;

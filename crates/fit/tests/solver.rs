@@ -121,6 +121,25 @@ fn termination_reasons_are_reported_not_raised() {
     assert_eq!(short.termination, Termination::MaxIterations);
     assert_eq!(short.iterations, 3);
 
+    // The evaluation budget bounds a fit whatever its iteration budget.
+    let starved = solve(
+        &Rosenbrock,
+        &[-1.2, 1.0],
+        LmSettings {
+            max_evaluations: 4,
+            ..LmSettings::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(starved.termination, Termination::MaxEvaluations);
+    assert!(!starved.termination.converged());
+    assert!(LmSettings {
+        max_evaluations: 0,
+        ..LmSettings::default()
+    }
+    .validated()
+    .is_err());
+
     let full = solve(&Rosenbrock, &[-1.2, 1.0], LmSettings::default()).unwrap();
     assert!(full.termination.converged(), "{:?}", full.termination);
     assert!((full.params[0] - 1.0).abs() < 1e-6 && (full.params[1] - 1.0).abs() < 1e-6);

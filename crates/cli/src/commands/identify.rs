@@ -473,6 +473,7 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
         position_cutoff_hz: a.cutoff,
         position_filter_order: 4,
         decimation: a.decimation,
+        fit_offset: true,
     };
     let fit = identify_inverse_model(dt, &torque, position, settings)
         .map_err(|e| BadInput(format!("{shown}: {e}")))?;
