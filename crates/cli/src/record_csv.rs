@@ -462,6 +462,52 @@ fn metadata_rails(table: &Table) -> [Option<([f64; 2], f64)>; 3] {
     out
 }
 
+/// A sample period at least this long \[s\] on a column `t` without a unit is taken for a
+/// time column in another unit: a DC motor record sampled once a second cannot show its
+/// transients (the paper's motor, the slowest here, has τe = 1 s).
+const MAX_PLAIN_PERIOD_S: f64 = 0.5;
+/// A peak voltage × peak current above this \[W\] on a `current` column without a unit is
+/// taken for a current in mA: 100 kW is beyond any servomotor this tool is for (the paper's
+/// motor draws 2.1 kW at its 40 V step).
+const MAX_PLAIN_POWER_W: f64 = 1e5;
+
+/// Refuses a record whose unit-less `t` or `current` column is implausible in SI units (a time
+/// in ms, a current in mA): the fit would converge to a motor scaled by 1000 in every
+/// parameter. A unit in the header (`t[s]`, `current[A]`) confirms the values as they are.
+fn check_unit_plausibility(
+    table: &Table,
+    find: &dyn Fn(&str) -> Option<usize>,
+    record: &Record,
+) -> std::result::Result<(), (usize, String)> {
+    let stated = |name: &str| find(name).is_some_and(|i| table.units[i].is_some());
+    let line = table.header_line;
+    let dt = motor_model::mean_period(&record.t);
+    if !stated("t") && dt >= MAX_PLAIN_PERIOD_S {
+        return Err((
+            line,
+            format!(
+                "the time steps by {dt} between samples: as seconds, far too slow to show a motor's transients. \
+                 If the time is in ms, write `t[ms]` in the header; write `t[s]` to confirm seconds"
+            ),
+        ));
+    }
+    let peak = |y: &[f64]| y.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let power = peak(&record.voltage) * peak(&record.current);
+    if !stated("current") && power > MAX_PLAIN_POWER_W {
+        return Err((
+            line,
+            format!(
+                "the current peaks at {} A with {} V applied: {:.3e} W, beyond any servomotor. \
+                 If the current is in mA, write `current[mA]` in the header; write `current[A]` to confirm amperes",
+                peak(&record.current),
+                peak(&record.voltage),
+                power
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Maps a table's columns to a record (SPEC section 4): names or aliases, units converted, `t`
 /// strictly increasing, `current` required, `voltage` required when `need_voltage`; finds the
 /// samples at an ADC rail.
@@ -545,6 +591,7 @@ fn to_record(
         t,
         clipped: [0; 3],
     };
+    check_unit_plausibility(table, &find, &record)?;
     let rails = metadata_rails(table);
     let masks: [Vec<bool>; 3] = std::array::from_fn(|c| {
         // With a position column the fits take the speed from the encoder (no ADC), so a

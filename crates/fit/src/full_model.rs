@@ -13,6 +13,7 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::error::FitError;
 use crate::lm::{solve, LeastSquares, LmSettings, NormalEquations, Termination};
+use crate::plausibility::{assess, RecordFacts, Refusal};
 use crate::stats::{sandwich_uncertainty, NeweyWest};
 
 /// Names of the six parameters, in the order of every array here.
@@ -101,8 +102,35 @@ pub struct FullFit {
     pub iterations: u64,
     /// Why the solver stopped.
     pub termination: Termination,
+    /// Why a fit whose solver converged is still not a result (a model worse than the
+    /// records' mean, parameters impossible for the records, no intervals); `None` for an
+    /// accepted fit. See [`FullFit::accepted`].
+    pub refusal: Option<Refusal>,
     /// Final weighted cost `½ Σ r²`.
     pub cost: f64,
+}
+
+impl FullFit {
+    /// Whether the fit is a result: its solver converged and nothing refuses it.
+    pub fn accepted(&self) -> bool {
+        self.termination.converged() && self.refusal.is_none()
+    }
+
+    /// Why the fit is not a result, in words; `None` when [`FullFit::accepted`].
+    pub fn failure(&self) -> Option<String> {
+        if !self.termination.converged() {
+            Some(format!(
+                "the fit did not converge ({} after {} iterations; weighted cost {:.3e})",
+                self.termination.text(),
+                self.iterations,
+                self.cost
+            ))
+        } else {
+            self.refusal
+                .as_ref()
+                .map(|r| format!("the fit is refused: {r}"))
+        }
+    }
 }
 
 /// Fraction of the largest second differences ignored by [`noise_std`] (isolated glitches).
@@ -408,6 +436,8 @@ pub(crate) trait WeightedProblem: LeastSquares {
     fn channel_quality(&self, values: [f64; 6]) -> Vec<ChannelQuality>;
     /// Newey–West covariance of the score `Jᵀr` at `theta` (channels independent).
     fn score_covariance(&self, theta: &[f64]) -> Option<DMatrix<f64>>;
+    /// What the records show, for the plausibility of the result.
+    fn facts(&self) -> RecordFacts;
 }
 
 /// Fits `problem` from `start` in two stages and reports the parameters with their intervals.
@@ -462,6 +492,7 @@ pub(crate) fn fit_weighted<P: WeightedProblem>(
         })
     });
     let quality = problem.channel_quality(values);
+    let refusal = assess(&params, ci95.is_some(), &quality, &problem.facts());
     Ok(FullFit {
         params,
         std_error,
@@ -470,6 +501,7 @@ pub(crate) fn fit_weighted<P: WeightedProblem>(
         quality,
         iterations,
         termination: report.termination,
+        refusal,
         cost: report.normal.cost,
     })
 }
@@ -551,5 +583,17 @@ impl WeightedProblem for FullProblem {
 
     fn score_covariance(&self, theta: &[f64]) -> Option<DMatrix<f64>> {
         FullProblem::score_covariance(self, theta)
+    }
+
+    fn facts(&self) -> RecordFacts {
+        let mut facts = RecordFacts::default();
+        for w in &self.tests {
+            facts.add(
+                w.dt,
+                w.n,
+                w.channels.iter().map(|c| (c.kind, c.data.as_slice())),
+            );
+        }
+        facts
     }
 }

@@ -33,6 +33,7 @@ mod mechanical;
 mod model33;
 mod output_error;
 mod paper_method;
+mod plausibility;
 mod signal;
 mod start;
 mod stats;
@@ -62,6 +63,7 @@ pub use paper_method::{
     tau_m_as_printed_37, with_low_voltage, HighVoltageResult, PaperIdentification, SpeedCheck,
     TwoTestFriction,
 };
+pub use plausibility::Refusal;
 pub use signal::{decimate, Butterworth};
 pub use start::steady_state_start;
 pub use stats::{

@@ -23,6 +23,7 @@ use crate::full_model::{
 };
 use crate::lm::{LeastSquares, LmSettings, NormalEquations};
 use crate::mechanical::{identify_inverse_model, InverseModelSettings};
+use crate::plausibility::RecordFacts;
 use crate::signal::Butterworth;
 use crate::stats::NeweyWest;
 use crate::step_location::uniform_period;
@@ -31,6 +32,9 @@ use crate::step_location::uniform_period;
 const FD_STEP: f64 = 1e-6;
 /// Fraction of the start's own RK4 step used for the whole fit (room for faster parameters).
 const STEP_MARGIN: f64 = 0.5;
+/// Most RK4 steps per record sample a simulation may take (a time constant 50 times below
+/// the sample period: 1/40 of it per step, with [`STEP_MARGIN`]).
+const MAX_STEPS_PER_SAMPLE: f64 = 4000.0;
 /// A voltage is piecewise constant when it has at most one jump per this many samples.
 const MIN_SAMPLES_PER_LEVEL: usize = 20;
 
@@ -175,11 +179,22 @@ impl OeProblem {
         f64::from_bits(self.max_step_bits.load(Ordering::Relaxed))
     }
 
-    /// Uses the step that suits `values` from now on.
-    fn set_step_for(&self, values: [f64; 6]) {
-        if let Some(h) = step_for(values) {
-            self.max_step_bits.store(h.to_bits(), Ordering::Relaxed);
+    /// Uses the step that suits `values` from now on; `None` (and no change) where that step
+    /// would cost more than [`MAX_STEPS_PER_SAMPLE`] RK4 steps per sample of the fastest
+    /// record: a time constant that far below the sample period is outside what the records
+    /// show, and simulating it would take without bound.
+    fn set_step_for(&self, values: [f64; 6]) -> Option<()> {
+        let h = step_for(values)?;
+        let dt_min = self
+            .records
+            .iter()
+            .map(|r| r.dt)
+            .fold(f64::INFINITY, f64::min);
+        if h * MAX_STEPS_PER_SAMPLE < dt_min {
+            return None;
         }
+        self.max_step_bits.store(h.to_bits(), Ordering::Relaxed);
+        Some(())
     }
 
     /// The simulated channels of every record at `values`: `[record][channel][kept sample]`.
@@ -234,7 +249,7 @@ impl OeProblem {
     /// Residuals and their Jacobian in θ (forward differences, the six perturbed simulations
     /// run in parallel).
     fn jacobian(&self, theta: &[f64]) -> Option<(Vec<f64>, DMatrix<f64>)> {
-        self.set_step_for(values_of(theta)?);
+        self.set_step_for(values_of(theta)?)?;
         let r0 = self.residuals(values_of(theta)?)?;
         let columns: Vec<Option<Vec<f64>>> = std::thread::scope(|scope| {
             let handles: Vec<_> = (0..6)
@@ -287,6 +302,18 @@ impl LeastSquares for OeProblem {
 }
 
 impl WeightedProblem for OeProblem {
+    fn facts(&self) -> RecordFacts {
+        let mut facts = RecordFacts::default();
+        for r in &self.records {
+            facts.add(
+                r.dt,
+                r.n,
+                r.channels.iter().map(|c| (c.kind, c.data.as_slice())),
+            );
+        }
+        facts
+    }
+
     fn sigmas_mut(&mut self) -> Vec<&mut f64> {
         self.records
             .iter_mut()
@@ -412,6 +439,14 @@ pub fn identify_output_error(
     let max_step_s =
         step_for(start.values()).ok_or_else(|| bad("start parameters", "not simulable".into()))?;
     let mut problem = OeProblem::new(records, max_step_s)?;
+    problem.set_step_for(start.values()).ok_or_else(|| {
+        bad(
+            "start parameters",
+            "a time constant (L/R or the mechanical one) more than 50 times below the sample period: \
+             the records cannot show it; give a start that matches them"
+                .into(),
+        )
+    })?;
     fit_weighted(&mut problem, start, settings)
 }
 
@@ -448,7 +483,16 @@ pub fn equation_error_start(records: &[ExcitedRecord<'_>]) -> Result<MotorParams
     for fraction in START_CUTOFFS {
         match equation_error_estimate(records, fraction) {
             Ok(start) => {
-                problem.set_step_for(start.values());
+                if problem.set_step_for(start.values()).is_none() {
+                    first_error.get_or_insert(bad(
+                        "records",
+                        format!(
+                            "the equation-error estimate (R {:.3e} Ω, L {:.3e} H) has a time constant far below the sample period",
+                            start.r_ohm, start.l_henry
+                        ),
+                    ));
+                    continue;
+                }
                 let theta: Vec<f64> = start.values().iter().map(|v| v.ln()).collect();
                 let cost = problem.cost(&theta).unwrap_or(f64::INFINITY);
                 if best.as_ref().is_none_or(|(c, _)| cost < *c) {

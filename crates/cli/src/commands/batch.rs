@@ -16,7 +16,7 @@ use serde_json::{json, Value};
 
 use crate::args::{IdentifyArgs, MethodArg};
 use crate::commands::identify::{
-    fit_excited, identify_pair, load_excited, load_step, LoadedExcited,
+    fit_excited, identify_pair, in_order, load_excited, load_step, LoadedExcited,
 };
 use crate::record_csv::{write_atomically, ColumnMap};
 use crate::{parallel, settings, BadInput, NotConverged};
@@ -76,6 +76,7 @@ fn identify_folder(folder: &Path) -> Row {
                 load_step(&high, &ColumnMap::default(), true)?,
                 load_step(&low, &ColumnMap::default(), true)?,
             );
+            let (hv, lv, _) = in_order(hv, lv);
             let (_, full) = identify_pair(&hv, &lv, MethodArg::Full)?;
             full.ok_or_else(|| anyhow::anyhow!("no full fit"))
         })();
@@ -126,11 +127,10 @@ fn row_json(r: &Row) -> Value {
             obj["error"] = json!(message);
         }
         Outcome::Fitted(fit) => {
-            obj["status"] = json!(if fit.termination.converged() {
-                "ok"
-            } else {
-                "not converged"
-            });
+            obj["status"] = json!(status_of(fit));
+            if let Some(why) = fit.failure() {
+                obj["error"] = json!(why);
+            }
             obj["iterations"] = json!(fit.iterations);
             let values = fit.params.values();
             let mut params = serde_json::Map::new();
@@ -162,15 +162,11 @@ fn summary_csv(rows: &[Row]) -> String {
     for r in rows {
         let (status, iterations, values, ci, message) = match &r.outcome {
             Outcome::Fitted(f) => (
-                if f.termination.converged() {
-                    "ok"
-                } else {
-                    "not converged"
-                },
+                status_of(f),
                 f.iterations.to_string(),
                 Some(f.params.values()),
                 f.ci95,
-                String::new(),
+                f.failure().unwrap_or_default(),
             ),
             Outcome::Failed { message, .. } => (
                 "error",
@@ -236,11 +232,11 @@ pub fn run(a: &IdentifyArgs, dir: &Path) -> Result<()> {
     write_atomically(&csv_path, summary_csv(&rows).as_bytes())?;
     let ok = rows
         .iter()
-        .filter(|r| matches!(&r.outcome, Outcome::Fitted(f) if f.termination.converged()))
+        .filter(|r| matches!(&r.outcome, Outcome::Fitted(f) if f.accepted()))
         .count();
     let not_converged = rows
         .iter()
-        .filter(|r| matches!(&r.outcome, Outcome::Fitted(f) if !f.termination.converged()))
+        .filter(|r| matches!(&r.outcome, Outcome::Fitted(f) if !f.accepted()))
         .count();
     let failed = n - ok - not_converged;
     let fitted: Vec<&Row> = rows
@@ -290,11 +286,7 @@ pub fn run(a: &IdentifyArgs, dir: &Path) -> Result<()> {
                     println!(
                         "{:<16} {:<13} {:>12.5e} {:>12.5e} {:>12.5e} {:>12.5e} {:>12.5e} {:>12.5e}",
                         r.name,
-                        if f.termination.converged() {
-                            "ok"
-                        } else {
-                            "not converged"
-                        },
+                        status_of(f),
                         v[0],
                         v[1],
                         v[2],
@@ -341,4 +333,16 @@ pub fn run(a: &IdentifyArgs, dir: &Path) -> Result<()> {
         .into());
     }
     Ok(())
+}
+
+/// A fitted folder's status: `ok`, `refused` (converged to parameters that are no result) or
+/// `not converged`.
+fn status_of(fit: &fit::FullFit) -> &'static str {
+    if fit.accepted() {
+        "ok"
+    } else if fit.termination.converged() {
+        "refused"
+    } else {
+        "not converged"
+    }
 }

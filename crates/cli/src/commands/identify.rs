@@ -26,6 +26,8 @@ pub struct LoadedStep {
     /// The file with the line span of its samples (`hv.csv:7-50007`), for errors.
     pub label: String,
     volts: f64,
+    /// Whether the step was negative: its channels are kept with their signs reversed.
+    pub mirrored: bool,
     dt: f64,
     current: Vec<f64>,
     speed: Option<Vec<f64>>,
@@ -122,22 +124,54 @@ pub fn load_step(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedStep
 pub fn step_from_record(shown: String, cols: Record) -> Result<LoadedStep> {
     let loc = locate_step(&cols.t, &cols.voltage).map_err(|e| BadInput(format!("{shown}: {e}")))?;
     let from = loc.index;
+    // Eq. (1)-(2) with Coulomb friction opposing the motion are odd in (E, I, Ω, θ): a
+    // negative step from rest is the mirror image of a positive one, and is fitted as such.
+    let sign = if loc.volts < 0.0 { -1.0 } else { 1.0 };
+    let tail = |v: &[f64]| v[from..].iter().map(|x| sign * x).collect::<Vec<f64>>();
     let speed = match (&cols.speed, &cols.position) {
-        (Some(s), _) => Some(s[from..].to_vec()),
-        (None, Some(p)) => Some(central_difference(&cols.t, p)[from..].to_vec()),
+        (Some(s), _) => Some(tail(s)),
+        (None, Some(p)) => Some(tail(&encoder_speed(&cols.t, p))),
         (None, None) => None,
     };
     Ok(LoadedStep {
         label: shown.clone(),
         path: shown,
-        volts: loc.volts,
+        volts: sign * loc.volts,
+        mirrored: sign < 0.0,
         dt: loc.dt,
-        current: cols.current[from..].to_vec(),
+        current: tail(&cols.current),
         speed,
-        position: cols.position.as_ref().map(|p| p[from..].to_vec()),
+        position: cols.position.as_deref().map(tail),
         exclude_current: None,
         exclude_speed: None,
     })
+}
+
+/// Shortest time base \[s\] of the speed taken from the encoder for the paper's method: at
+/// 100 kHz a 2000-count encoder moves half a count per sample at 160 rad/s, and the central
+/// difference of one sample reads 0 or 157 rad/s (the last sample is the method's Ωrm).
+const ENCODER_SPEED_BASE_S: f64 = 1e-3;
+
+/// Speed \[rad/s\] from the encoder angle `theta` by differences over ±m samples, m the
+/// fewest that span [`ENCODER_SPEED_BASE_S`] (m = 1, the central difference, at 1 kHz and
+/// below); one-sided near the ends.
+fn encoder_speed(t: &[f64], theta: &[f64]) -> Vec<f64> {
+    let n = t.len().min(theta.len());
+    let dt = motor_model::mean_period(t);
+    let m = if dt > 0.0 {
+        ((0.5 * ENCODER_SPEED_BASE_S / dt).ceil() as usize).max(1)
+    } else {
+        1
+    };
+    if m == 1 {
+        return central_difference(t, theta);
+    }
+    (0..n)
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(m), (i + m).min(n - 1));
+            (theta[b] - theta[a]) / (t[b] - t[a])
+        })
+        .collect()
 }
 
 /// `x` with 7 significant digits, in plain or scientific notation as suits its size.
@@ -196,7 +230,8 @@ pub fn report_json(
     let quality = match full {
         Some(f) => json!({
             "termination": f.termination.text(),
-            "converged": f.termination.converged(),
+            "converged": f.accepted(),
+            "refusal": f.refusal.as_ref().map(|r| r.to_string()),
             "iterations": f.iterations,
             "weighted_cost": f.cost,
             "correlation": f.correlation.as_ref().map(|c| json!({
@@ -275,11 +310,16 @@ fn print_table(
     );
     match full {
         Some(f) => {
-            println!(
-                "fit: {} after {} iterations",
-                f.termination.text(),
-                f.iterations
-            );
+            match &f.refusal {
+                Some(why) if f.termination.converged() => {
+                    println!("fit: FAILED after {} iterations — {why}", f.iterations)
+                }
+                _ => println!(
+                    "fit: {} after {} iterations",
+                    f.termination.text(),
+                    f.iterations
+                ),
+            }
             for q in &f.quality {
                 println!(
                     "  {} {}: residual RMS {:.3e}, fit {:.3} %, noise {:.3e}",
@@ -617,6 +657,18 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
         load_step(high, &map, a.quiet)?,
         load_step(low, &map, a.quiet)?,
     );
+    let (hv, lv, swapped) = in_order(hv, lv);
+    if !a.quiet {
+        if let Some(note) = swapped {
+            eprintln!("note: {note}");
+        }
+        for s in [&hv, &lv].into_iter().filter(|s| s.mirrored) {
+            eprintln!(
+                "note: {}: a negative step ({} V), fitted as its mirror image (the model is odd in E, I and the speed)",
+                s.label, -s.volts
+            );
+        }
+    }
     let files = [hv.path.as_str(), lv.path.as_str()];
     let (paper, full) = identify_pair(&hv, &lv, a.method)?;
     let paper = paper.as_ref().map_err(String::as_str);
@@ -804,6 +856,20 @@ fn column_map(a: &IdentifyArgs) -> Result<ColumnMap> {
     }
 }
 
+/// The pair with the higher step first (the paper's method needs it: Eq. (33) is the high-voltage
+/// approximation), and a note when the records were given the other way round.
+pub fn in_order(hv: LoadedStep, lv: LoadedStep) -> (LoadedStep, LoadedStep, Option<String>) {
+    if lv.volts > hv.volts {
+        let note = format!(
+            "--high {} steps to {:.4} V, below --low {} at {:.4} V: taken the other way round",
+            hv.label, hv.volts, lv.label, lv.volts
+        );
+        (lv, hv, Some(note))
+    } else {
+        (hv, lv, None)
+    }
+}
+
 /// Identifies a high- and a low-voltage step record: the paper's method (unless clipped
 /// samples rule it out), then with `MethodArg::Full` the full model started from it (or from
 /// the steady states where it does not apply).
@@ -844,18 +910,11 @@ pub fn identify_pair(
     Ok((paper, full))
 }
 
-/// Exit status of a full fit: [`NotConverged`] with its residual when the solver gave up.
+/// Exit status of a full fit: [`NotConverged`] with the reason when the solver gave up or the
+/// result is refused.
 fn converged(full: Option<&FullFit>) -> Result<()> {
-    if let Some(f) = full {
-        if !f.termination.converged() {
-            return Err(NotConverged(format!(
-                "the full fit did not converge ({} after {} iterations; weighted cost {:.3e})",
-                f.termination.text(),
-                f.iterations,
-                f.cost
-            ))
-            .into());
-        }
+    match full.and_then(FullFit::failure) {
+        Some(why) => Err(NotConverged(why).into()),
+        None => Ok(()),
     }
-    Ok(())
 }

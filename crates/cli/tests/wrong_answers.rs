@@ -1,0 +1,201 @@
+//! Inputs that once gave a wrong answer called "converged" (exit 0), or hung: each now gives the
+//! right answer within its interval, or a refusal that names the cause with its exit code.
+
+mod common;
+
+use common::{motorid, scratch, stderr, stdout};
+use serde_json::Value;
+
+/// The paper's motor (Sec. 4.1): R, L, k, f, J, Ts.
+const TRUTH: [(&str, f64); 6] = [
+    ("R", 0.3),
+    ("L", 0.3),
+    ("k", 0.15),
+    ("f", 0.05),
+    ("J", 1.0),
+    ("Ts", 0.03),
+];
+
+/// The README's logger settings (10-bit ADC, 1 LSB noise, 2000-count encoder).
+const LOGGER: [&str; 7] = [
+    "--adc-bits",
+    "10",
+    "--noise-lsb",
+    "1",
+    "--encoder-cpr",
+    "2000",
+    "--speed-from",
+];
+
+fn simulate(path: &std::path::Path, args: &[&str]) {
+    let p = path.to_str().unwrap();
+    let mut all = vec!["simulate", "-o", p];
+    all.extend_from_slice(args);
+    let out = motorid(&all);
+    assert!(out.status.success(), "{args:?}: {}", stderr(&out));
+}
+
+fn json_of(args: &[&str]) -> (Value, std::process::Output) {
+    let mut all = args.to_vec();
+    all.extend_from_slice(&["--json", "--quiet"]);
+    let out = motorid(&all);
+    let v = serde_json::from_str(&stdout(&out)).unwrap_or(Value::Null);
+    (v, out)
+}
+
+/// Exit 0, and every parameter within `rel` of the truth or inside its 95 % interval.
+fn assert_identified(args: &[&str], rel: f64) {
+    let (v, out) = json_of(args);
+    assert_eq!(out.status.code(), Some(0), "{args:?}: {}", stderr(&out));
+    for (name, truth) in TRUTH {
+        let p = &v["parameters"][name];
+        let value = p["value"].as_f64().unwrap();
+        let ci = p["ci95"].as_array().expect("intervals");
+        let (lo, hi) = (ci[0].as_f64().unwrap(), ci[1].as_f64().unwrap());
+        let close = ((value - truth) / truth).abs() < rel;
+        assert!(
+            close || (lo <= truth && truth <= hi),
+            "{args:?}: {name} = {value} [{lo}, {hi}], truth {truth}"
+        );
+    }
+}
+
+#[test]
+fn the_readme_logger_record_fits_by_output_error_instead_of_hanging() {
+    // Ran past 600 s at full CPU: the equation-error start fitted an offset it cannot tell
+    // from Ts on a record that never reverses.
+    let dir = scratch("hang");
+    let hv = dir.join("hv.csv");
+    let mut args = LOGGER.to_vec();
+    args.extend_from_slice(&["encoder", "--voltage", "40"]);
+    simulate(&hv, &args);
+    let (v, out) = json_of(&["identify", "--record", hv.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    for (name, truth) in TRUTH {
+        let ci = v["parameters"][name]["ci95"].as_array().unwrap();
+        let (lo, hi) = (ci[0].as_f64().unwrap(), ci[1].as_f64().unwrap());
+        assert!(
+            lo <= truth && truth <= hi,
+            "{name}: [{lo}, {hi}] misses {truth}"
+        );
+    }
+}
+
+#[test]
+fn single_noise_free_steps_of_any_length_identify_the_motor() {
+    // 10, 20 and 40 s steps gave R 0.577, J 0.0037, Ts 2443 N·m "converged"; 5 s said "the motor
+    // must move" although it reaches 60 rad/s.
+    let dir = scratch("single");
+    for seconds in ["5", "10", "40"] {
+        let path = dir.join(format!("s{seconds}.csv"));
+        simulate(&path, &["--voltage", "40", "--duration", seconds]);
+        assert_identified(&["identify", "--record", path.to_str().unwrap()], 1e-4);
+    }
+}
+
+#[test]
+fn a_wrong_minimum_is_refused_not_called_converged() {
+    let dir = scratch("refused");
+    let path = dir.join("s40.csv");
+    simulate(&path, &["--voltage", "40", "--duration", "40"]);
+    // The minimum the old start led to: Ts far above any torque the motor makes.
+    let start = dir.join("start.json");
+    std::fs::write(
+        &start,
+        r#"{"R":0.5768,"L":0.1647,"k":0.1499,"f":7.4887e-5,"J":0.0037,"Ts":2443}"#,
+    )
+    .unwrap();
+    let out = motorid(&[
+        "identify",
+        "--record",
+        path.to_str().unwrap(),
+        "--start",
+        start.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert_eq!(out.status.code(), Some(3), "{}", stderr(&out));
+    let text = stdout(&out);
+    assert!(text.contains("fit: FAILED"), "{text}");
+    assert!(!text.contains("fit: converged"), "{text}");
+    let err = stderr(&out);
+    assert!(
+        err.contains("refused") && err.contains("worse than its mean"),
+        "{err}"
+    );
+}
+
+#[test]
+fn columns_in_ms_or_ma_without_a_unit_are_refused_before_fitting() {
+    let dir = scratch("units");
+    let hv = dir.join("hv.csv");
+    simulate(&hv, &["--voltage", "40", "--duration", "5"]);
+    let text = std::fs::read_to_string(&hv).unwrap();
+    let scaled = |column: usize| -> String {
+        let mut header_seen = false;
+        text.lines()
+            .map(|l| {
+                if l.starts_with('#') {
+                    return l.to_string();
+                }
+                if !header_seen {
+                    header_seen = true;
+                    return l.to_string();
+                }
+                let mut v: Vec<String> = l.split(',').map(str::to_string).collect();
+                v[column] = format!("{}", v[column].parse::<f64>().unwrap() * 1000.0);
+                v.join(",")
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+            + "\n"
+    };
+    let ms = dir.join("ms.csv");
+    std::fs::write(&ms, scaled(0)).unwrap();
+    common::assert_bad_input(&["identify", "--record", ms.to_str().unwrap()], "t[ms]");
+    let ma = dir.join("ma.csv");
+    std::fs::write(&ma, scaled(2)).unwrap();
+    common::assert_bad_input(
+        &["identify", "--record", ma.to_str().unwrap()],
+        "current[mA]",
+    );
+    // A unit in the header takes the values as they are (and converts them).
+    let stated = dir.join("ma_stated.csv");
+    std::fs::write(
+        &stated,
+        scaled(2).replacen("t,voltage,current,", "t,voltage,current[mA],", 1),
+    )
+    .unwrap();
+    assert_identified(&["identify", "--record", stated.to_str().unwrap()], 1e-4);
+}
+
+#[test]
+fn swapped_high_and_low_records_are_put_in_order_and_said() {
+    // --method paper with --high and --low swapped gave k +3.6 %, f +14 %, J +8.9 %, exit 0.
+    let dir = scratch("swapped");
+    let (hv, lv) = (dir.join("hv.csv"), dir.join("lv.csv"));
+    simulate(&hv, &["--voltage", "40"]);
+    simulate(&lv, &["--voltage", "2.5"]);
+    let (h, l) = (hv.to_str().unwrap(), lv.to_str().unwrap());
+    let ordered = motorid(&["identify", "--high", h, "--low", l, "--method", "paper"]);
+    let swapped = motorid(&["identify", "--high", l, "--low", h, "--method", "paper"]);
+    assert_eq!(swapped.status.code(), Some(0), "{}", stderr(&swapped));
+    assert!(
+        stderr(&swapped).contains("taken the other way round"),
+        "{}",
+        stderr(&swapped)
+    );
+    assert_eq!(stdout(&ordered), stdout(&swapped));
+}
+
+#[test]
+fn negative_steps_are_identified_as_mirror_images() {
+    // Said "Ts = -0.0299: must be >= 0 ... did both records settle?" although both settled.
+    let dir = scratch("negative");
+    let (hv, lv) = (dir.join("hv.csv"), dir.join("lv.csv"));
+    simulate(&hv, &["--voltage", "-40"]);
+    simulate(&lv, &["--voltage", "-2.5"]);
+    let (h, l) = (hv.to_str().unwrap(), lv.to_str().unwrap());
+    assert_identified(&["identify", "--high", h, "--low", l], 1e-6);
+    let out = motorid(&["identify", "--high", h, "--low", l]);
+    assert!(stderr(&out).contains("negative step"), "{}", stderr(&out));
+}

@@ -1,0 +1,266 @@
+//! Whether a fit that ran to its solver's convergence is a result at all.
+//!
+//! A least-squares solver converges to a minimum, not necessarily to the motor: a bad start or
+//! records in the wrong units can leave it at parameters that explain the records worse than
+//! their mean does, or that no motor could have with these records. Such a fit is refused
+//! ([`Refusal`]) with the reason, never reported as converged.
+
+use std::fmt;
+
+use motor_model::MotorParams;
+
+use crate::full_model::{Channel, ChannelQuality};
+
+/// A time constant below this fraction of the sample period is not seen by the records: the
+/// transient is over a thousand times faster than one sample.
+const FASTEST_VISIBLE: f64 = 1e-3;
+/// A time constant above this multiple of the record's span is not seen either: the record
+/// shows a thousandth of the transient.
+const SLOWEST_VISIBLE: f64 = 1e3;
+
+/// Why a converged fit is still not a result.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum Refusal {
+    /// A channel the model explains less well than the channel's own mean does: NRMSE above 1
+    /// (SPEC section 7), a negative fit percentage.
+    WorseThanConstant {
+        /// Index of the record.
+        test: usize,
+        /// Which channel.
+        channel: Channel,
+        /// Its NRMSE `‖y − ŷ‖/‖y − ȳ‖`.
+        nrmse: f64,
+    },
+    /// Parameters no motor could have and still produce these records.
+    Implausible {
+        /// What is impossible, with the values.
+        reason: String,
+    },
+    /// The parameter covariance could not be computed (a singular Jacobian: some parameter
+    /// does not change the model's output), so there are no intervals.
+    NoIntervals,
+}
+
+impl fmt::Display for Refusal {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Refusal::WorseThanConstant {
+                test,
+                channel,
+                nrmse,
+            } => write!(
+                f,
+                "the model explains the {} of record {} worse than its mean does (NRMSE {nrmse:.3} > 1): \
+                 the fit found a wrong minimum (give a start with --start) or the records do not fit the model",
+                channel.name(),
+                test + 1
+            ),
+            Refusal::Implausible { reason } => write!(f, "physically impossible for these records: {reason}"),
+            Refusal::NoIntervals => f.write_str(
+                "the 95 % intervals cannot be computed (singular Jacobian: some parameter does not act on the records)",
+            ),
+        }
+    }
+}
+
+/// What a fit's records show, for [`assess`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct RecordFacts {
+    /// Shortest sample period of the records \[s\].
+    pub dt_min_s: f64,
+    /// Longest record \[s\].
+    pub span_max_s: f64,
+    /// Largest |current| measured \[A\].
+    pub peak_current_a: f64,
+    /// Whether some record shows the motor turning.
+    pub moved: bool,
+}
+
+/// The reason to refuse a converged fit of `params`, if any.
+pub(crate) fn assess(
+    params: &MotorParams,
+    has_intervals: bool,
+    quality: &[ChannelQuality],
+    facts: &RecordFacts,
+) -> Option<Refusal> {
+    if let Some(q) = quality
+        .iter()
+        .find(|q| q.nrmse_fit_percent.is_finite() && q.nrmse_fit_percent < 0.0)
+    {
+        return Some(Refusal::WorseThanConstant {
+            test: q.test,
+            channel: q.channel,
+            nrmse: 1.0 - q.nrmse_fit_percent / 100.0,
+        });
+    }
+    let p = params;
+    let stall_torque = p.k_nm_per_a * facts.peak_current_a;
+    if facts.moved && p.ts_nm >= stall_torque {
+        return Some(Refusal::Implausible {
+            reason: format!(
+                "Ts = {:.4e} N·m is at least the largest motor torque k·|I| = {stall_torque:.4e} N·m of the records, \
+                 yet the motor turns",
+                p.ts_nm
+            ),
+        });
+    }
+    // Eq. (18) τe = L/R, and the mechanical time constant of the motor with its electrical
+    // damping, J R/(R f + k²) (the speed's time constant when τe ≪ τm; Eq. (19)'s J/f grows
+    // without bound as f → 0 and is no test).
+    let tau_e = p.l_henry / p.r_ohm;
+    let tau_mech = p.j_kgm2 * p.r_ohm / (p.r_ohm * p.f_nms_per_rad + p.k_nm_per_a.powi(2));
+    for (name, tau, what) in [
+        ("tau_e = L/R", tau_e, "L"),
+        ("J R/(R f + k²)", tau_mech, "J"),
+    ] {
+        let fast = FASTEST_VISIBLE * facts.dt_min_s;
+        let slow = SLOWEST_VISIBLE * facts.span_max_s;
+        if !(tau.is_finite() && tau >= fast && tau <= slow) {
+            return Some(Refusal::Implausible {
+                reason: format!(
+                    "{name} = {tau:.4e} s is outside what records sampled every {:.4e} s for {:.4e} s can show \
+                     ({fast:.1e} to {slow:.1e} s): {what} is not determined by them (are the time and current \
+                     columns in the units their headers say?)",
+                    facts.dt_min_s, facts.span_max_s
+                ),
+            });
+        }
+    }
+    (!has_intervals).then_some(Refusal::NoIntervals)
+}
+
+impl Default for RecordFacts {
+    /// No record yet.
+    fn default() -> Self {
+        RecordFacts {
+            dt_min_s: f64::INFINITY,
+            span_max_s: 0.0,
+            peak_current_a: 0.0,
+            moved: false,
+        }
+    }
+}
+
+impl RecordFacts {
+    /// Adds a record of `n` samples every `dt` \[s\] with its fitted channels.
+    pub fn add<'a>(
+        &mut self,
+        dt: f64,
+        n: usize,
+        channels: impl Iterator<Item = (Channel, &'a [f64])>,
+    ) {
+        self.dt_min_s = self.dt_min_s.min(dt);
+        self.span_max_s = self.span_max_s.max(dt * n as f64);
+        for (kind, data) in channels {
+            match kind {
+                Channel::Current => {
+                    let peak = data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                    self.peak_current_a = self.peak_current_a.max(peak);
+                }
+                Channel::Speed | Channel::EncoderSpeed => self.moved |= shows_motion(data),
+            }
+        }
+    }
+}
+
+/// Whether a measured speed shows the motor turning: its largest |value| stands above ten
+/// times its own noise level (an encoder at rest reads 0 exactly).
+fn shows_motion(speed: &[f64]) -> bool {
+    let peak = speed.iter().fold(0.0f64, |m, w| m.max(w.abs()));
+    peak > 0.0 && peak > 10.0 * crate::full_model::noise_std(speed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn paper() -> MotorParams {
+        MotorParams::new(0.3, 0.3, 0.15, 0.05, 1.0, 0.03).unwrap()
+    }
+
+    fn facts() -> RecordFacts {
+        RecordFacts {
+            dt_min_s: 1e-3,
+            span_max_s: 50.0,
+            peak_current_a: 53.6,
+            moved: true,
+        }
+    }
+
+    fn quality(fit_percent: f64) -> ChannelQuality {
+        ChannelQuality {
+            test: 0,
+            channel: Channel::EncoderSpeed,
+            noise_std: 1.0,
+            rms_residual: 1.0,
+            nrmse_fit_percent: fit_percent,
+        }
+    }
+
+    #[test]
+    fn the_paper_motor_on_its_records_is_accepted() {
+        assert_eq!(assess(&paper(), true, &[quality(98.4)], &facts()), None);
+    }
+
+    #[test]
+    fn each_impossibility_is_named() {
+        // A model worse than the channel's mean (the 40 V step fitted to Ts = 2443 N·m).
+        assert!(matches!(
+            assess(&paper(), true, &[quality(-208.9)], &facts()),
+            Some(Refusal::WorseThanConstant { nrmse, .. }) if (nrmse - 3.089).abs() < 1e-9
+        ));
+        // A Coulomb torque the motor's largest torque never overcomes, though it turned.
+        let stuck = MotorParams {
+            ts_nm: 8.1,
+            ..paper()
+        };
+        assert!(matches!(
+            assess(&stuck, true, &[], &facts()),
+            Some(Refusal::Implausible { reason }) if reason.contains("Ts")
+        ));
+        // The same torque is possible when nothing shows the motor turning.
+        let still = RecordFacts {
+            moved: false,
+            ..facts()
+        };
+        assert_eq!(assess(&stuck, true, &[], &still), None);
+        // L = 7e-91 H (100 kHz records fitted from a wrong start): τe far below a sample.
+        let no_l = MotorParams {
+            l_henry: 7e-91,
+            ..paper()
+        };
+        assert!(matches!(
+            assess(&no_l, true, &[], &facts()),
+            Some(Refusal::Implausible { reason }) if reason.contains("tau_e")
+        ));
+        // A mechanical time constant a thousand record spans long.
+        let heavy = MotorParams {
+            j_kgm2: 1e6,
+            ..paper()
+        };
+        assert!(matches!(
+            assess(&heavy, true, &[], &facts()),
+            Some(Refusal::Implausible { reason }) if reason.contains("J is not determined")
+        ));
+        assert_eq!(
+            assess(&paper(), false, &[], &facts()),
+            Some(Refusal::NoIntervals)
+        );
+    }
+
+    #[test]
+    fn motion_is_told_from_an_encoder_at_rest() {
+        let mut f = RecordFacts::default();
+        f.add(
+            1e-3,
+            4,
+            [(Channel::EncoderSpeed, &[0.0, 0.0, 0.0, 0.0][..])].into_iter(),
+        );
+        assert!(!f.moved);
+        let ramp: Vec<f64> = (0..100).map(|i| i as f64).collect();
+        f.add(1e-3, 100, [(Channel::Speed, &ramp[..])].into_iter());
+        assert!(f.moved);
+        assert_eq!(f.span_max_s, 0.1);
+    }
+}
