@@ -715,8 +715,10 @@ mod tests {
 
     #[test]
     fn aliases_name_the_columns_and_clashes_are_refused() {
-        let r = record("Time,U,I,Omega\n0,1,2,3\n1,1,2,3\n").unwrap().record;
-        assert_eq!((r.t[1], r.voltage[0], r.current[0]), (1.0, 1.0, 2.0));
+        let r = record("Time,U,I,Omega\n0,1,2,3\n0.001,1,2,3\n")
+            .unwrap()
+            .record;
+        assert_eq!((r.t[1], r.voltage[0], r.current[0]), (0.001, 1.0, 2.0));
         assert_eq!(r.speed.unwrap()[0], 3.0);
         let e = record("t,time,voltage,current\n0,0,1,2\n").unwrap_err();
         assert_eq!(e.0, 1);
@@ -730,11 +732,22 @@ mod tests {
     }
 
     #[test]
+    fn unit_less_columns_in_ms_or_ma_are_refused() {
+        let e = record("t,voltage,current\n0,40,0\n1,40,1\n2,40,2\n").unwrap_err();
+        assert!(e.1.contains("t[ms]"), "{}", e.1);
+        assert!(record("t[s],voltage,current\n0,40,0\n1,40,1\n2,40,2\n").is_ok());
+        let e = record("t,voltage,current\n0,40,0\n0.001,40,53570\n").unwrap_err();
+        assert!(e.1.contains("current[mA]"), "{}", e.1);
+        let r = record("t,voltage,current[mA]\n0,40,0\n0.001,40,53570\n").unwrap();
+        assert_eq!(r.record.current[1], 53.57);
+    }
+
+    #[test]
     fn metadata_rails_mark_clipped_samples() {
         let mut text = String::from("# range_current: -10,10\nt,voltage,current\n");
         for i in 0..100 {
             let c = if (40..50).contains(&i) { 10.0 } else { 1.0 };
-            text.push_str(&format!("{},{},{}\n", i, 5, c));
+            text.push_str(&format!("{},{},{}\n", f64::from(i) * 1e-3, 5, c));
         }
         let loaded = record(&text).unwrap();
         assert_eq!(loaded.record.clipped, [0, 10, 0]);

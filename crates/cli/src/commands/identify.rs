@@ -119,8 +119,8 @@ pub fn load_step(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedStep
 }
 
 /// Finds the step in a record (named `shown` in errors) and keeps the samples from it on. Speed
-/// (for the paper method's Ωrm) comes from the `speed` column, or from the `position` column by
-/// central differences; the full fit uses the encoder angle where there is one.
+/// (for the paper method's Ωrm) comes from the `position` column ([`encoder_speed`]), else the
+/// `speed` column; the full fit uses the encoder angle where there is one.
 pub fn step_from_record(shown: String, cols: Record) -> Result<LoadedStep> {
     let loc = locate_step(&cols.t, &cols.voltage).map_err(|e| BadInput(format!("{shown}: {e}")))?;
     let from = loc.index;
@@ -128,9 +128,12 @@ pub fn step_from_record(shown: String, cols: Record) -> Result<LoadedStep> {
     // negative step from rest is the mirror image of a positive one, and is fitted as such.
     let sign = if loc.volts < 0.0 { -1.0 } else { 1.0 };
     let tail = |v: &[f64]| v[from..].iter().map(|x| sign * x).collect::<Vec<f64>>();
+    // The encoder first, as the paper did (and as the full fit does): a speed column beside it
+    // may be a one-sample difference of the same encoder, quantised to 0 or 157 rad/s at
+    // 100 kHz.
     let speed = match (&cols.speed, &cols.position) {
-        (Some(s), _) => Some(tail(s)),
-        (None, Some(p)) => Some(tail(&encoder_speed(&cols.t, p))),
+        (_, Some(p)) => Some(tail(&encoder_speed(&cols.t, p))),
+        (Some(s), None) => Some(tail(s)),
         (None, None) => None,
     };
     Ok(LoadedStep {
