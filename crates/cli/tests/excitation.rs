@@ -176,11 +176,31 @@ fn batch_identifies_a_fleet_and_reports_broken_folders() {
     std::fs::create_dir_all(&broken).unwrap();
     std::fs::write(broken.join("high.csv"), "t,voltage,current\n0,1,x\n").unwrap();
     std::fs::write(broken.join("low.csv"), "t,voltage,current\n0,1,2\n").unwrap();
+    // A folder with one step record of the README's logger settings, which once made the
+    // output-error start loop for ever and stalled the whole batch.
+    let single = fleet.join("motor_hv");
+    std::fs::create_dir_all(&single).unwrap();
+    let out = motorid(&[
+        "simulate",
+        "--voltage",
+        "40",
+        "--adc-bits",
+        "10",
+        "--noise-lsb",
+        "1",
+        "--encoder-cpr",
+        "2000",
+        "--speed-from",
+        "encoder",
+        "-o",
+        single.join("hv.csv").to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
     let out = motorid(&["identify", "--batch", fleet.to_str().unwrap(), "-q"]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     let text = stdout(&out);
     assert!(
-        text.contains("13 motors: 12 identified, 0 not converged, 1 failed"),
+        text.contains("14 motors: 13 identified, 0 not converged or refused, 1 failed"),
         "{text}"
     );
     let csv = std::fs::read_to_string(fleet.join("summary.csv")).unwrap();

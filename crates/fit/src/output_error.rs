@@ -588,9 +588,15 @@ fn electrical_estimate(
         )
     })?;
     let (r, mut l, k) = (x[0], x[1], x[2]);
+    let span = records
+        .iter()
+        .map(|r| r.dt * r.current.len() as f64)
+        .fold(0.0, f64::max);
     if !(r > 0.0 && k > 0.0 && r.is_finite() && k.is_finite()) {
         return Err(domain(format!(
-            "R = {r:.4e} Ω, k = {k:.4e} N·m/A from the voltage equation: is the current or speed sign reversed?"
+            "R = {r:.4e} Ω, k = {k:.4e} N·m/A from the voltage equation: either the records show too little \
+             motion to tell R I from k Ω (the longest lasts {span:.4e} s: record until the speed settles), or the \
+             current or speed sign is reversed"
         )));
     }
     let dt_min = per_record.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);

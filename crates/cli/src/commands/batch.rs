@@ -299,7 +299,7 @@ pub fn run(a: &IdentifyArgs, dir: &Path) -> Result<()> {
             }
         }
         println!(
-            "{n} motors: {ok} identified, {not_converged} not converged, {failed} failed; {elapsed:.1} s on {threads} threads"
+            "{n} motors: {ok} identified, {not_converged} not converged or refused, {failed} failed; {elapsed:.1} s on {threads} threads"
         );
         if !fitted.is_empty() {
             println!("against motor.json (median |error|, 95 % intervals containing the truth):");
