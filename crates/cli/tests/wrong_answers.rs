@@ -199,3 +199,46 @@ fn negative_steps_are_identified_as_mirror_images() {
     let out = motorid(&["identify", "--high", h, "--low", l]);
     assert!(stderr(&out).contains("negative step"), "{}", stderr(&out));
 }
+
+#[test]
+fn an_encoder_moving_half_a_count_per_sample_still_identifies_the_motor() {
+    // Two 50 s steps at 100 kHz with a 2000-count encoder (the README's logger otherwise) gave
+    // L = 7e-91 H, J = 1.5e-41 kg·m² "converged": the encoder moves half a count per sample, so
+    // the one-sample speed column reads multiples of 157 rad/s and its last sample, the paper
+    // method's Ωrm, read 0. The same half count per sample at 10 kHz with 200 counts per turn
+    // (1 M samples instead of 10 M: 7 s here instead of 2 min).
+    let dir = scratch("half_count");
+    let (hv, lv) = (dir.join("hv.csv"), dir.join("lv.csv"));
+    for (path, volts, seed) in [(&hv, "40", "1"), (&lv, "2.5", "2")] {
+        simulate(
+            path,
+            &[
+                "--adc-bits",
+                "10",
+                "--noise-lsb",
+                "1",
+                "--encoder-cpr",
+                "200",
+                "--speed-from",
+                "encoder",
+                "--rate",
+                "10000",
+                "--voltage",
+                volts,
+                "--seed",
+                seed,
+            ],
+        );
+    }
+    let (h, l) = (hv.to_str().unwrap(), lv.to_str().unwrap());
+    let (v, out) = json_of(&["identify", "--high", h, "--low", l]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    for (name, truth) in TRUTH {
+        let ci = v["parameters"][name]["ci95"].as_array().unwrap();
+        let (lo, hi) = (ci[0].as_f64().unwrap(), ci[1].as_f64().unwrap());
+        assert!(
+            lo <= truth && truth <= hi,
+            "{name}: [{lo}, {hi}] misses {truth}"
+        );
+    }
+}

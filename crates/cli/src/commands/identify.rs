@@ -656,6 +656,22 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
         .into());
     };
     let map = column_map(a)?;
+    let clock = std::time::Instant::now();
+    let bytes: u64 = [high, low]
+        .iter()
+        .filter_map(|p| std::fs::metadata(p).ok())
+        .map(|m| m.len())
+        .sum();
+    // About a second of reading on this kind of machine.
+    let long = bytes > 50_000_000 && !a.quiet;
+    if long {
+        eprintln!(
+            "reading {} and {} ({:.0} MB)…",
+            high.display(),
+            low.display(),
+            bytes as f64 / 1e6
+        );
+    }
     let (hv, lv) = (
         load_step(high, &map, a.quiet)?,
         load_step(low, &map, a.quiet)?,
@@ -673,7 +689,17 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
         }
     }
     let files = [hv.path.as_str(), lv.path.as_str()];
+    if long {
+        eprintln!(
+            "read in {:.1} s; fitting {} samples…",
+            clock.elapsed().as_secs_f64(),
+            hv.current.len() + lv.current.len()
+        );
+    }
     let (paper, full) = identify_pair(&hv, &lv, a.method)?;
+    if long {
+        eprintln!("done in {:.1} s", clock.elapsed().as_secs_f64());
+    }
     let paper = paper.as_ref().map_err(String::as_str);
     let method = match a.method {
         MethodArg::Paper => "paper",
