@@ -99,18 +99,22 @@ fn a_fifo_is_streamed_to_its_reader() {
     let fifo = dir.join("fifo");
     // SAFETY: a valid NUL-terminated path.
     assert_eq!(unsafe { libc::mkfifo(c_path(&fifo).as_ptr(), 0o644) }, 0);
-    let reader = {
+    let (sent, received) = std::sync::mpsc::channel();
+    {
         let fifo = fifo.clone();
-        std::thread::spawn(move || std::fs::read_to_string(fifo).unwrap())
-    };
+        std::thread::spawn(move || sent.send(std::fs::read_to_string(fifo).unwrap()));
+    }
     let out = simulate_to(&fifo, "1");
+    assert!(out.status.success(), "{}", stderr(&out));
     // Should motorid never have opened the FIFO, release the reader (it then reads nothing).
     let _ = std::fs::OpenOptions::new()
         .write(true)
         .custom_flags(libc::O_NONBLOCK)
         .open(&fifo);
-    let text = reader.join().unwrap();
-    assert!(out.status.success(), "{}", stderr(&out));
+    // A reader still blocked now waits on a FIFO that was replaced: fail instead of hanging.
+    let text = received
+        .recv_timeout(Duration::from_secs(10))
+        .expect("the reader of the FIFO got nothing: was the FIFO replaced?");
     assert_record(&text, 1.0);
     assert!(std::fs::symlink_metadata(&fifo)
         .unwrap()
@@ -140,26 +144,52 @@ fn a_device_node_is_written_in_place() {
     assert_eq!(names(&dir), ["null"]);
 }
 
+/// The full device (`/dev/full`, 1:7) as a node of its own in `dir`, so that a regression can
+/// only replace that copy; `/dev/full` itself where nodes cannot be made (without that right, a
+/// process cannot replace anything in `/dev` either).
+fn full_device(dir: &Path) -> PathBuf {
+    let node = dir.join("full");
+    // SAFETY: a valid NUL-terminated path.
+    let made = unsafe {
+        libc::mknod(
+            c_path(&node).as_ptr(),
+            libc::S_IFCHR | 0o666,
+            libc::makedev(1, 7),
+        )
+    };
+    if made == 0 {
+        node
+    } else {
+        PathBuf::from("/dev/full")
+    }
+}
+
 #[test]
 fn dev_full_reports_the_full_disk_and_stays_a_device() {
-    let before = std::fs::metadata("/dev/full").unwrap();
+    let dir = fresh("out-full");
+    let full = full_device(&dir);
+    let before = std::fs::metadata(&full).unwrap();
     assert!(before.file_type().is_char_device());
-    let out = simulate_to(Path::new("/dev/full"), "1");
+    let out = simulate_to(&full, "1");
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(
-        err.contains("cannot write /dev/full") && err.contains("No space left on device"),
+        err.contains(&format!("cannot write {}", full.display()))
+            && err.contains("No space left on device"),
         "{err}"
     );
     assert_eq!(err.trim_end().lines().count(), 1, "{err}");
-    let after = std::fs::metadata("/dev/full").unwrap();
-    assert!(after.file_type().is_char_device());
-    assert_eq!((after.ino(), after.rdev()), (before.ino(), before.rdev()));
+    let after = std::fs::metadata(&full).unwrap();
     assert!(
-        !names(Path::new("/dev"))
-            .iter()
-            .any(|n| n.starts_with(".full.tmp")),
-        "a temporary file was left in /dev"
+        after.file_type().is_char_device(),
+        "the device was replaced"
+    );
+    assert_eq!((after.ino(), after.rdev()), (before.ino(), before.rdev()));
+    let folder = full.parent().unwrap();
+    assert!(
+        !names(folder).iter().any(|n| n.starts_with(".full.tmp")),
+        "a temporary file was left in {}",
+        folder.display()
     );
 }
 
