@@ -89,7 +89,8 @@ pub struct AcquireArgs {
     /// rad/s], "counts_per_rev": N}; default: the emulator's.
     #[arg(long, value_name = "FILE.json")]
     pub calibration: Option<PathBuf>,
-    /// Output record CSV (written atomically: never a partial file).
+    /// Output record CSV (a file is replaced atomically, never left partial; a FIFO or device is
+    /// written directly).
     #[arg(short = 'o', long = "output", value_name = "FILE.csv")]
     pub output: PathBuf,
     /// No progress on standard error.

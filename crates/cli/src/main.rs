@@ -10,6 +10,7 @@
 mod args;
 mod commands;
 mod daq_client;
+mod output;
 mod paper_values;
 mod parallel;
 mod plot;
@@ -64,10 +65,55 @@ fn quiet_broken_pipe() {
     }
 }
 
+/// The output paths a command line names, for [`output::check`] before any work starts.
+fn declared_outputs(command: &Command) -> Vec<output::Declared> {
+    use output::Declared::{Dir, File};
+    let mut outputs = Vec::new();
+    match command {
+        Command::Simulate(a) => outputs.extend(a.output.iter().map(|path| File {
+            flag: "-o",
+            path: path.clone(),
+        })),
+        Command::Acquire(a) => outputs.push(File {
+            flag: "-o",
+            path: a.output.clone(),
+        }),
+        Command::Demo(a) => outputs.extend(a.out.iter().map(|path| Dir {
+            flag: "--out",
+            path: path.clone(),
+        })),
+        Command::Fleet(a) => outputs.push(Dir {
+            flag: "--out",
+            path: a.out.clone(),
+        }),
+        Command::Emps(a) => outputs.extend(a.plot.iter().map(|path| Dir {
+            flag: "--plot",
+            path: path.clone(),
+        })),
+        Command::Identify(a) => {
+            outputs.extend(a.plot.iter().map(|path| Dir {
+                flag: "--plot",
+                path: path.clone(),
+            }));
+            // The summaries go into the batch folder; a missing folder is the batch's own error.
+            if let Some(dir) = a.batch.as_ref().filter(|d| d.is_dir()) {
+                for name in ["summary.csv", "summary.json"] {
+                    outputs.push(File {
+                        flag: "--batch",
+                        path: dir.join(name),
+                    });
+                }
+            }
+        }
+        Command::Model(_) | Command::Montecarlo(_) | Command::Emulate(_) => {}
+    }
+    outputs
+}
+
 fn main() -> ExitCode {
     quiet_broken_pipe();
     let cli = Cli::parse();
-    let outcome = match cli.command {
+    let outcome = output::check(&declared_outputs(&cli.command)).and_then(|()| match cli.command {
         Command::Model(a) => commands::model::run(&a),
         Command::Simulate(a) => commands::simulate::run(&a),
         Command::Identify(a) => commands::identify::run(&a),
@@ -77,7 +123,7 @@ fn main() -> ExitCode {
         Command::Emulate(a) => commands::emulate::run(&a),
         Command::Acquire(a) => commands::acquire::run(&a),
         Command::Emps(a) => commands::emps::run(&a),
-    };
+    });
     match outcome {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {

@@ -9,7 +9,7 @@ use anyhow::{anyhow, Result};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::record_csv::write_atomically;
+use crate::output;
 
 /// One curve of a panel.
 pub struct Series<'a> {
@@ -179,7 +179,7 @@ fn render(
         SVGBackend::with_string(&mut svg, size).into_drawing_area(),
         &svg_path,
     )?;
-    write_atomically(&svg_path, svg.as_bytes())?;
+    output::write(&svg_path, svg.as_bytes())?;
     let mut pixels = vec![0u8; size.0 as usize * size.1 as usize * 3];
     draw_png(
         BitMapBackend::with_buffer(&mut pixels, size).into_drawing_area(),
@@ -192,7 +192,7 @@ fn render(
             .write_image(&pixels, size.0, size.1, image::ColorType::Rgb8)
             .map_err(|e| anyhow!("encoding {}: {e}", png_path.display()))?;
     }
-    write_atomically(&png_path, &png)?;
+    output::write(&png_path, &png)?;
     Ok([svg_path, png_path])
 }
 

@@ -1,11 +1,11 @@
 //! Records in the CSV contract of SPEC section 4: reading them with errors that name the file
-//! and line, and writing them atomically.
+//! and line, and writing them (through [`crate::output`]).
 
 use std::fs::File;
 use std::io::{BufRead, Write};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use motor_model::Record;
 
 use crate::BadInput;
@@ -654,38 +654,10 @@ pub fn write_to(
     Ok(())
 }
 
-/// Writes `record` to `path` atomically (see [`write_atomically`]).
+/// Writes `record` to `path`: a file replaced atomically, a device or FIFO streamed, `-`
+/// standard output (see [`crate::output`]).
 pub fn write_file(path: &Path, record: &Record, metadata: &[(String, String)]) -> Result<()> {
-    let mut bytes = Vec::new();
-    write_to(&mut bytes, record, metadata)?;
-    write_atomically(path, &bytes)
-}
-
-/// Writes `bytes` to `path` atomically: a temporary file beside it, flushed and synced, then
-/// renamed over `path`. A failure never leaves a half-written file under `path`.
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let name = path
-        .file_name()
-        .with_context(|| format!("{}: not a file name", path.display()))?;
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(name);
-    tmp_name.push(format!(".tmp-{}", std::process::id()));
-    let tmp: PathBuf = dir.join(tmp_name);
-    let result = (|| -> Result<()> {
-        let mut file = File::create(&tmp)?;
-        file.write_all(bytes)?;
-        file.sync_all()?;
-        std::fs::rename(&tmp, path)?;
-        Ok(())
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result.with_context(|| format!("cannot write {}", path.display()))
+    crate::output::write_with(path, |mut out| write_to(&mut out, record, metadata))
 }
 
 #[cfg(test)]

@@ -257,8 +257,9 @@ fn output_is_written_atomically_and_unwritable_paths_fail_cleanly() {
         "-o",
         "/no/such/dir/rec.csv",
     ]);
-    assert_eq!(out.status.code(), Some(1));
-    assert!(stderr(&out).contains("cannot write /no/such/dir/rec.csv"));
+    // Refused before simulating, as input to fix.
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("-o /no/such/dir/rec.csv: directory /no/such/dir does not exist"));
     let dir = scratch("atomic");
     let path = dir.join("rec.csv");
     let out = motorid(&[

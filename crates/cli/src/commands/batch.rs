@@ -18,7 +18,8 @@ use crate::args::{IdentifyArgs, MethodArg};
 use crate::commands::identify::{
     fit_excited, identify_pair, in_order, load_excited, load_step, LoadedExcited,
 };
-use crate::record_csv::{write_atomically, ColumnMap};
+use crate::output;
+use crate::record_csv::ColumnMap;
 use crate::{parallel, settings, BadInput, NotConverged};
 
 /// Outcome of one folder.
@@ -229,7 +230,7 @@ pub fn run(a: &IdentifyArgs, dir: &Path) -> Result<()> {
     let elapsed = started.elapsed().as_secs_f64();
     let csv_path = dir.join("summary.csv");
     let json_path = dir.join("summary.json");
-    write_atomically(&csv_path, summary_csv(&rows).as_bytes())?;
+    output::write(&csv_path, summary_csv(&rows).as_bytes())?;
     let ok = rows
         .iter()
         .filter(|r| matches!(&r.outcome, Outcome::Fitted(f) if f.accepted()))
@@ -268,7 +269,7 @@ pub fn run(a: &IdentifyArgs, dir: &Path) -> Result<()> {
         })).collect::<Vec<_>>(),
         "rows": rows.iter().map(row_json).collect::<Vec<_>>(),
     });
-    write_atomically(
+    output::write(
         &json_path,
         serde_json::to_string_pretty(&report)?.as_bytes(),
     )?;

@@ -12,7 +12,8 @@ use motor_model::{Derived, Effects, Input, MotorParams, NoiseRng};
 use crate::args::FleetArgs;
 use crate::commands::montecarlo::{measured_step, Logger};
 use crate::commands::simulate::metadata;
-use crate::record_csv::{write_atomically, write_file};
+use crate::output;
+use crate::record_csv::write_file;
 use crate::{settings, BadInput};
 
 /// Samples aimed at per record.
@@ -67,7 +68,7 @@ pub fn run(a: &FleetArgs) -> Result<()> {
         };
         let dir = a.out.join(format!("motor_{:0width$}", m + 1));
         std::fs::create_dir_all(&dir)?;
-        write_atomically(
+        output::write(
             &dir.join("motor.json"),
             serde_json::to_string_pretty(&motor)?.as_bytes(),
         )?;

@@ -1,8 +1,6 @@
 //! `motorid simulate`: a record of a simulated test.
 
-use std::io::Write;
-
-use anyhow::{Context, Result};
+use anyhow::Result;
 use motor_model::{Effects, Input, MotorParams, Simulator, StepResponse, Trace};
 
 use crate::args::{SimulateArgs, SolverArg};
@@ -142,12 +140,7 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
                 }
             );
         }
-        _ => {
-            let stdout = std::io::stdout();
-            let mut out = std::io::BufWriter::new(stdout.lock());
-            record_csv::write_to(&mut out, &record, &meta)?;
-            out.flush().context("cannot write to standard output")?;
-        }
+        _ => record_csv::write_file(std::path::Path::new("-"), &record, &meta)?,
     }
     Ok(())
 }
