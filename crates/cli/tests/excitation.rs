@@ -3,16 +3,7 @@
 
 mod common;
 
-use common::{motorid, scratch, stderr, stdout};
-
-const TRUTH: [(&str, f64); 6] = [
-    ("R", 0.3),
-    ("L", 0.3),
-    ("k", 0.15),
-    ("f", 0.05),
-    ("J", 1.0),
-    ("Ts", 0.03),
-];
+use common::{motorid, scratch, stderr, stdout, LOGGER, PAPER_TRUTH as TRUTH};
 
 /// Every parameter of the JSON report contains the paper motor's value in its 95 % interval.
 fn assert_within_intervals(json: &str) {
@@ -41,16 +32,7 @@ fn assert_within_intervals(json: &str) {
 #[test]
 fn staircase_and_prbs_records_identify_the_paper_motor() {
     let dir = scratch("excitation");
-    let logger = [
-        "--adc-bits",
-        "10",
-        "--noise-lsb",
-        "1",
-        "--encoder-cpr",
-        "2000",
-        "--speed-from",
-        "encoder",
-    ];
+    let logger = LOGGER;
     let stair = dir.join("staircase.csv");
     let prbs = dir.join("prbs.csv");
     for (path, input, duration) in [

@@ -3,37 +3,11 @@
 
 mod common;
 
-use common::{motorid, scratch, stderr, stdout};
+use common::{
+    assert_truth_in_intervals, interval, motorid, scratch, simulate_to, stderr, stdout, LOGGER,
+    PAPER_TRUTH as TRUTH,
+};
 use serde_json::Value;
-
-/// The paper's motor (Sec. 4.1): R, L, k, f, J, Ts.
-const TRUTH: [(&str, f64); 6] = [
-    ("R", 0.3),
-    ("L", 0.3),
-    ("k", 0.15),
-    ("f", 0.05),
-    ("J", 1.0),
-    ("Ts", 0.03),
-];
-
-/// The README's logger settings (10-bit ADC, 1 LSB noise, 2000-count encoder).
-const LOGGER: [&str; 7] = [
-    "--adc-bits",
-    "10",
-    "--noise-lsb",
-    "1",
-    "--encoder-cpr",
-    "2000",
-    "--speed-from",
-];
-
-fn simulate(path: &std::path::Path, args: &[&str]) {
-    let p = path.to_str().unwrap();
-    let mut all = vec!["simulate", "-o", p];
-    all.extend_from_slice(args);
-    let out = motorid(&all);
-    assert!(out.status.success(), "{args:?}: {}", stderr(&out));
-}
 
 fn json_of(args: &[&str]) -> (Value, std::process::Output) {
     let mut all = args.to_vec();
@@ -50,8 +24,7 @@ fn assert_identified(args: &[&str], rel: f64) {
     for (name, truth) in TRUTH {
         let p = &v["parameters"][name];
         let value = p["value"].as_f64().unwrap();
-        let ci = p["ci95"].as_array().expect("intervals");
-        let (lo, hi) = (ci[0].as_f64().unwrap(), ci[1].as_f64().unwrap());
+        let (lo, hi) = interval(&v, name);
         let close = ((value - truth) / truth).abs() < rel;
         assert!(
             close || (lo <= truth && truth <= hi),
@@ -67,18 +40,11 @@ fn the_readme_logger_record_fits_by_output_error_instead_of_hanging() {
     let dir = scratch("hang");
     let hv = dir.join("hv.csv");
     let mut args = LOGGER.to_vec();
-    args.extend_from_slice(&["encoder", "--voltage", "40"]);
-    simulate(&hv, &args);
+    args.extend_from_slice(&["--voltage", "40"]);
+    simulate_to(&hv, &args);
     let (v, out) = json_of(&["identify", "--record", hv.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
-    for (name, truth) in TRUTH {
-        let ci = v["parameters"][name]["ci95"].as_array().unwrap();
-        let (lo, hi) = (ci[0].as_f64().unwrap(), ci[1].as_f64().unwrap());
-        assert!(
-            lo <= truth && truth <= hi,
-            "{name}: [{lo}, {hi}] misses {truth}"
-        );
-    }
+    assert_truth_in_intervals(&v, &TRUTH);
 }
 
 #[test]
@@ -88,7 +54,7 @@ fn single_noise_free_steps_of_any_length_identify_the_motor() {
     let dir = scratch("single");
     for seconds in ["5", "10", "40"] {
         let path = dir.join(format!("s{seconds}.csv"));
-        simulate(&path, &["--voltage", "40", "--duration", seconds]);
+        simulate_to(&path, &["--voltage", "40", "--duration", seconds]);
         assert_identified(&["identify", "--record", path.to_str().unwrap()], 1e-4);
     }
 }
@@ -97,7 +63,7 @@ fn single_noise_free_steps_of_any_length_identify_the_motor() {
 fn a_wrong_minimum_is_refused_not_called_converged() {
     let dir = scratch("refused");
     let path = dir.join("s40.csv");
-    simulate(&path, &["--voltage", "40", "--duration", "40"]);
+    simulate_to(&path, &["--voltage", "40", "--duration", "40"]);
     // The minimum the old start led to: Ts far above any torque the motor makes.
     let start = dir.join("start.json");
     std::fs::write(
@@ -128,7 +94,7 @@ fn a_wrong_minimum_is_refused_not_called_converged() {
 fn columns_in_ms_or_ma_without_a_unit_are_refused_before_fitting() {
     let dir = scratch("units");
     let hv = dir.join("hv.csv");
-    simulate(&hv, &["--voltage", "40", "--duration", "5"]);
+    simulate_to(&hv, &["--voltage", "40", "--duration", "5"]);
     let text = std::fs::read_to_string(&hv).unwrap();
     let scaled = |column: usize| -> String {
         let mut header_seen = false;
@@ -173,8 +139,8 @@ fn swapped_high_and_low_records_are_put_in_order_and_said() {
     // --method paper with --high and --low swapped gave k +3.6 %, f +14 %, J +8.9 %, exit 0.
     let dir = scratch("swapped");
     let (hv, lv) = (dir.join("hv.csv"), dir.join("lv.csv"));
-    simulate(&hv, &["--voltage", "40"]);
-    simulate(&lv, &["--voltage", "2.5"]);
+    simulate_to(&hv, &["--voltage", "40"]);
+    simulate_to(&lv, &["--voltage", "2.5"]);
     let (h, l) = (hv.to_str().unwrap(), lv.to_str().unwrap());
     let ordered = motorid(&["identify", "--high", h, "--low", l, "--method", "paper"]);
     let swapped = motorid(&["identify", "--high", l, "--low", h, "--method", "paper"]);
@@ -192,8 +158,8 @@ fn negative_steps_are_identified_as_mirror_images() {
     // Said "Ts = -0.0299: must be >= 0 ... did both records settle?" although both settled.
     let dir = scratch("negative");
     let (hv, lv) = (dir.join("hv.csv"), dir.join("lv.csv"));
-    simulate(&hv, &["--voltage", "-40"]);
-    simulate(&lv, &["--voltage", "-2.5"]);
+    simulate_to(&hv, &["--voltage", "-40"]);
+    simulate_to(&lv, &["--voltage", "-2.5"]);
     let (h, l) = (hv.to_str().unwrap(), lv.to_str().unwrap());
     assert_identified(&["identify", "--high", h, "--low", l], 1e-6);
     let out = motorid(&["identify", "--high", h, "--low", l]);
@@ -210,7 +176,7 @@ fn an_encoder_moving_half_a_count_per_sample_still_identifies_the_motor() {
     let dir = scratch("half_count");
     let (hv, lv) = (dir.join("hv.csv"), dir.join("lv.csv"));
     for (path, volts, seed) in [(&hv, "40", "1"), (&lv, "2.5", "2")] {
-        simulate(
+        simulate_to(
             path,
             &[
                 "--adc-bits",
@@ -233,12 +199,5 @@ fn an_encoder_moving_half_a_count_per_sample_still_identifies_the_motor() {
     let (h, l) = (hv.to_str().unwrap(), lv.to_str().unwrap());
     let (v, out) = json_of(&["identify", "--high", h, "--low", l]);
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
-    for (name, truth) in TRUTH {
-        let ci = v["parameters"][name]["ci95"].as_array().unwrap();
-        let (lo, hi) = (ci[0].as_f64().unwrap(), ci[1].as_f64().unwrap());
-        assert!(
-            lo <= truth && truth <= hi,
-            "{name}: [{lo}, {hi}] misses {truth}"
-        );
-    }
+    assert_truth_in_intervals(&v, &TRUTH);
 }

@@ -41,3 +41,54 @@ pub fn scratch(name: &str) -> PathBuf {
     std::fs::create_dir_all(&dir).unwrap();
     dir
 }
+
+/// The paper's motor (Sec. 4.1) by parameter name: R, L, k, f, J, Ts (SI units).
+pub const PAPER_TRUTH: [(&str, f64); 6] = [
+    ("R", 0.3),
+    ("L", 0.3),
+    ("k", 0.15),
+    ("f", 0.05),
+    ("J", 1.0),
+    ("Ts", 0.03),
+];
+
+/// The paper's logger as `simulate` options: 10-bit ADC, 1 LSB noise, 2000-count encoder,
+/// speed from the encoder.
+pub const LOGGER: [&str; 8] = [
+    "--adc-bits",
+    "10",
+    "--noise-lsb",
+    "1",
+    "--encoder-cpr",
+    "2000",
+    "--speed-from",
+    "encoder",
+];
+
+/// `motorid simulate -o path ARGS...`, which must succeed.
+pub fn simulate_to(path: &std::path::Path, args: &[&str]) {
+    let mut all = vec!["simulate", "-o", path.to_str().unwrap()];
+    all.extend_from_slice(args);
+    let out = motorid(&all);
+    assert!(out.status.success(), "{args:?}: {}", stderr(&out));
+}
+
+/// The 95 % interval `[lo, hi]` of parameter `name` in a `--json` report.
+pub fn interval(report: &serde_json::Value, name: &str) -> (f64, f64) {
+    let ci = &report["parameters"][name]["ci95"];
+    (
+        ci[0].as_f64().unwrap_or(f64::NAN),
+        ci[1].as_f64().unwrap_or(f64::NAN),
+    )
+}
+
+/// Every parameter's 95 % interval in a `--json` report contains its `truth`.
+pub fn assert_truth_in_intervals(report: &serde_json::Value, truth: &[(&str, f64)]) {
+    for &(name, value) in truth {
+        let (lo, hi) = interval(report, name);
+        assert!(
+            lo <= value && value <= hi,
+            "{name}: [{lo}, {hi}] misses {value}"
+        );
+    }
+}
