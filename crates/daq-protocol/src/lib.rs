@@ -256,17 +256,43 @@ pub enum Frame<'a> {
 
 /// Why a frame could not be encoded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum EncodeError {
     /// The output buffer is too small.
-    BufferTooSmall,
-    /// A field is out of range (block of 0 or more than [`MAX_BLOCK_SAMPLES`] samples, a
-    /// packed length that does not match, an empty channel mask).
-    Invalid,
+    BufferTooSmall {
+        /// Bytes the frame needs on the line (with its `00`).
+        needed: usize,
+        /// Bytes the buffer has.
+        available: usize,
+    },
+    /// A field is out of range (a block of 0 or more than [`MAX_BLOCK_SAMPLES`] samples, a
+    /// packed length that does not match, an empty or unknown channel mask).
+    Invalid {
+        /// The field.
+        field: &'static str,
+        /// Its value.
+        value: u32,
+    },
+}
+
+impl core::fmt::Display for EncodeError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            EncodeError::BufferTooSmall { needed, available } => write!(
+                f,
+                "the frame needs {needed} bytes and the buffer has {available}"
+            ),
+            EncodeError::Invalid { field, value } => {
+                write!(f, "{field} = {value} is out of range for a frame")
+            }
+        }
+    }
 }
 
 /// Why bytes fed to a [`Decoder`] were not a frame. Every one of these is detected, never
 /// passed on: the decoder drops the frame and waits for the next `00`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum DecodeError {
     /// More than [`MAX_FRAME`] bytes without a `00`: garbage, dropped up to the next `00`.
     Overflow,
@@ -280,6 +306,20 @@ pub enum DecodeError {
     Malformed,
 }
 
+impl core::fmt::Display for DecodeError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            DecodeError::Overflow => "more than a frame's bytes without a 00 delimiter",
+            DecodeError::Stuffing => "broken COBS stuffing (a code byte points past the end)",
+            DecodeError::Crc => "CRC-32C mismatch: the frame was corrupted on the line",
+            DecodeError::TooShort => "too short to hold kind, sequence number and CRC",
+            DecodeError::Malformed => {
+                "unknown kind, or a payload of the wrong length or with invalid fields"
+            }
+        })
+    }
+}
+
 /// Encodes the body `kind, seq, payload, crc` of `frame` into `body` and returns its length.
 fn encode_body(frame: &Frame<'_>, body: &mut [u8; MAX_BODY]) -> Result<usize, EncodeError> {
     let mut w = Writer { buf: body, len: 0 };
@@ -288,7 +328,10 @@ fn encode_body(frame: &Frame<'_>, body: &mut [u8; MAX_BODY]) -> Result<usize, En
             Command::Status => w.head(kind::STATUS, seq),
             Command::Configure { rate_hz, channels } => {
                 if channels == 0 || channels > ALL_CHANNELS {
-                    return Err(EncodeError::Invalid);
+                    return Err(EncodeError::Invalid {
+                        field: "channel mask",
+                        value: u32::from(channels),
+                    });
                 }
                 w.head(kind::CONFIGURE, seq);
                 w.bytes(&rate_hz.to_le_bytes());
@@ -332,13 +375,18 @@ fn encode_body(frame: &Frame<'_>, body: &mut [u8; MAX_BODY]) -> Result<usize, En
                 packed,
             } => {
                 let n = usize::from(count);
-                if n == 0
-                    || n > MAX_BLOCK_SAMPLES
-                    || channels == 0
-                    || channels > ALL_CHANNELS
-                    || packed.len() != packed_len(channels, n)
-                {
-                    return Err(EncodeError::Invalid);
+                let invalid = |field, value: usize| EncodeError::Invalid {
+                    field,
+                    value: u32::try_from(value).unwrap_or(u32::MAX),
+                };
+                if n == 0 || n > MAX_BLOCK_SAMPLES {
+                    return Err(invalid("samples in a block", n));
+                }
+                if channels == 0 || channels > ALL_CHANNELS {
+                    return Err(invalid("channel mask", usize::from(channels)));
+                }
+                if packed.len() != packed_len(channels, n) {
+                    return Err(invalid("packed bytes", packed.len()));
                 }
                 w.head(kind::SAMPLES, seq);
                 w.bytes(&first.to_le_bytes());
@@ -385,8 +433,12 @@ impl Writer<'_> {
 pub fn encode(frame: &Frame<'_>, out: &mut [u8]) -> Result<usize, EncodeError> {
     let mut body = [0u8; MAX_BODY];
     let len = encode_body(frame, &mut body)?;
-    if out.len() < cobs_max_encoded_len(len) + 1 {
-        return Err(EncodeError::BufferTooSmall);
+    let needed = cobs_max_encoded_len(len) + 1;
+    if out.len() < needed {
+        return Err(EncodeError::BufferTooSmall {
+            needed,
+            available: out.len(),
+        });
     }
     let n = cobs_encode(&body[..len], out);
     out[n] = 0;

@@ -1,9 +1,9 @@
 //! The codec against its specification: round trips, garbage, corruption, line budget.
 
 use daq_protocol::{
-    encode, pack_sample, packed_len, samples_frame_len, Command, DecodeError, Decoder, ErrorCode,
-    Frame, Mode, Reply, Sample, State, ALL_CHANNELS, LINE_BYTES_PER_S, MAX_BLOCK_SAMPLES,
-    MAX_FRAME,
+    encode, pack_sample, packed_len, samples_frame_len, Command, DecodeError, Decoder, EncodeError,
+    ErrorCode, Frame, Mode, Reply, Sample, State, ALL_CHANNELS, LINE_BYTES_PER_S,
+    MAX_BLOCK_SAMPLES, MAX_FRAME,
 };
 use proptest::prelude::*;
 
@@ -159,7 +159,17 @@ fn invalid_frames_are_refused_by_the_encoder() {
             packed: &[0; 3],
         },
     };
-    assert!(encode(&bad_len, &mut buf).is_err());
+    let e = encode(&bad_len, &mut buf).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            EncodeError::Invalid {
+                field: "packed bytes",
+                value: 3
+            }
+        ),
+        "{e}"
+    );
     let too_many = Frame::Reply {
         seq: 0,
         reply: Reply::Samples {
@@ -169,7 +179,11 @@ fn invalid_frames_are_refused_by_the_encoder() {
             packed: &[0; 42],
         },
     };
-    assert!(encode(&too_many, &mut buf).is_err());
+    let e = encode(&too_many, &mut buf).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "samples in a block = 33 is out of range for a frame"
+    );
     let no_channels = Frame::Command {
         seq: 0,
         command: Command::Configure {
@@ -178,14 +192,18 @@ fn invalid_frames_are_refused_by_the_encoder() {
         },
     };
     assert!(encode(&no_channels, &mut buf).is_err());
-    assert!(encode(
+    let e = encode(
         &Frame::Command {
             seq: 0,
-            command: Command::Status
+            command: Command::Status,
         },
-        &mut buf[..3]
+        &mut buf[..3],
     )
-    .is_err());
+    .unwrap_err();
+    assert!(
+        matches!(e, EncodeError::BufferTooSmall { available: 3, .. }),
+        "{e}"
+    );
 }
 
 #[test]
