@@ -185,11 +185,11 @@ fn bad_input_gives_one_line_errors_and_exit_code_2() {
         (vec!["simulate", "--duration", "1"], "give one input"),
         (
             vec!["simulate", "--voltage", "1", "--duration", "-1"],
-            "duration = -1",
+            "--duration -1: expected a record length greater than 0 s",
         ),
         (
             vec!["simulate", "--voltage", "1", "--rate", "0"],
-            "sample rate = 0",
+            "--rate 0: expected a sample rate greater than 0 Hz",
         ),
         (
             vec![
@@ -201,7 +201,7 @@ fn bad_input_gives_one_line_errors_and_exit_code_2() {
                 "--rate",
                 "1e6",
             ],
-            "at most 10,000,000 samples",
+            "1e15 samples; at most 10000000 fit in memory",
         ),
         (vec!["simulate", "--sine", "0.1"], "two numbers"),
         (vec!["simulate", "--sine", "0.1,-2"], "sine frequency = -2"),
@@ -312,6 +312,26 @@ fn montecarlo_small_version() {
         assert!(full < paper, "{p}");
         assert!(coverage >= 18.0 / 24.0, "{p}");
     }
+}
+
+/// A study whose every run fails (records of 0.05 s: the steps are far from settled) exits
+/// with code 3 and no table; the progress counts the failures instead of calling them
+/// identified.
+#[test]
+fn montecarlo_runs_that_fail_are_counted_and_give_exit_code_3() {
+    let out = motorid(&["montecarlo", "--runs", "2", "--duration", "0.05"]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(3), "{err}");
+    assert!(
+        err.contains("2/2 record pairs done: 0 identified, 2 failed"),
+        "{err}"
+    );
+    assert!(!err.contains("2/2 record pairs identified"), "{err}");
+    assert!(
+        err.contains("error: all 2 runs failed; nothing to report. The first: run 0"),
+        "{err}"
+    );
+    assert!(!stdout(&out).contains("NaN"), "{}", stdout(&out));
 }
 
 /// The identify command on simulated records of the paper's motor: noise-free records give

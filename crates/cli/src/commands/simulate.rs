@@ -80,16 +80,17 @@ pub fn metadata(motor: &MotorParams, effects: &Effects, input: &Input) -> Vec<(S
 
 pub fn run(a: &SimulateArgs) -> Result<()> {
     let motor = settings::motor(&a.motor.motor)?;
+    let (duration_s, rate_hz) = settings::record_grid(a.duration, a.rate)?;
     let input = settings::input(settings::InputSpec {
         voltage: a.voltage,
         sine: a.sine.as_deref(),
         levels: a.levels.as_deref(),
         prbs: a.prbs.as_deref(),
         step_at: a.step_at,
-        duration: a.duration,
+        duration: duration_s,
     })?;
     let effects = settings::effects(&a.effects)?;
-    let trace = trace(&motor, effects, &input, a.solver, a.duration, a.rate)?;
+    let trace = trace(&motor, effects, &input, a.solver, duration_s, rate_hz)?;
     let measurement = settings::measurement(&a.measurement, &trace)?;
     let record = measurement
         .apply(&trace)
