@@ -357,9 +357,12 @@ pub fn input(spec: InputSpec<'_>) -> Result<Input> {
 pub fn effects(specs: &[String]) -> Result<Effects> {
     let mut set = Effects::none();
     for spec in specs {
-        let effect: Effect = spec
-            .parse()
-            .map_err(|e| BadInput(format!("--effect {e}")))?;
+        let effect: Effect = spec.parse().map_err(|e| match e {
+            motor_model::ModelError::EffectSpec { reason, .. } => {
+                BadInput(format!("--effect {spec}: {reason}"))
+            }
+            other => BadInput(format!("--effect {spec}: {other}")),
+        })?;
         set = set.with(effect);
     }
     Ok(set)

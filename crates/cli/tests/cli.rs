@@ -215,6 +215,26 @@ fn bad_input_gives_one_line_errors_and_exit_code_2() {
                 "--voltage",
                 "1",
                 "--effect",
+                "cogging_torque:amp=0.01,amp=0.02",
+            ],
+            "--effect cogging_torque:amp=0.01,amp=0.02: key `amp` given twice; give each key once",
+        ),
+        (
+            vec![
+                "simulate",
+                "--voltage",
+                "1",
+                "--effect",
+                "cogging_torque:amp=0.01,phase",
+            ],
+            "`phase` is not of the form key=value",
+        ),
+        (
+            vec![
+                "simulate",
+                "--voltage",
+                "1",
+                "--effect",
                 "stribeck_friction:tst=0.001",
             ],
             "at least the motor's Coulomb torque",
