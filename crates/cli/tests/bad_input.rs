@@ -368,6 +368,11 @@ fn acquisition_options_are_checked() {
         b"{\"voltage\": [5, -5], \"current\": [0, 1], \"speed\": [0, 1], \"counts_per_rev\": 10}",
     );
     let typo_cal = write(&dir, "typo.json", b"{\"volts\": [0, 1]}");
+    let small_cal = write(
+        &dir,
+        "small.json",
+        b"{\"voltage\": [-10, 10], \"current\": [-20, 20], \"speed\": [-50, 50], \"counts_per_rev\": 500}",
+    );
     let cases: Vec<(Vec<&str>, &str)> = vec![
         (
             vec![
@@ -444,6 +449,50 @@ fn acquisition_options_are_checked() {
                 o,
             ],
             "unknown field `volts`",
+        ),
+        (
+            vec![
+                "acquire",
+                "--port",
+                "/dev/null",
+                "--voltage",
+                "40",
+                "--duration",
+                "1",
+                "-o",
+                o,
+            ],
+            "--port /dev/null: not a serial port (a device that is not a terminal); give the logger's port, e.g. /dev/ttyUSB0, or the PTY path `motorid emulate --pty` prints",
+        ),
+        (
+            vec![
+                "acquire",
+                "--port",
+                "/no/such/tty",
+                "--voltage",
+                "1000",
+                "--duration",
+                "1",
+                "-o",
+                o,
+            ],
+            "--voltage 1000: outside the logger's calibrated voltage range -50 to 50 V",
+        ),
+        (
+            vec![
+                "acquire",
+                "--port",
+                "/no/such/tty",
+                "--voltage",
+                "-12",
+                "--duration",
+                "1",
+                "--calibration",
+                small_cal.to_str().unwrap(),
+                "-o",
+                o,
+            ],
+            "--voltage -12: outside the logger's calibrated voltage range -10 to 10 V (from ",
         ),
         (
             vec!["emulate", "--pty", "--faults", "ber"],
