@@ -334,6 +334,54 @@ fn montecarlo_small_version() {
     }
 }
 
+/// A long simulation reports its phase on standard error (here about 6 s: a 1 µs electrical
+/// time constant makes the ODE take 25 ns steps); a short one and `--quiet` do not.
+#[test]
+fn long_simulations_report_progress_unless_quiet() {
+    let dir = scratch("progress");
+    let motor = dir.join("fast.json");
+    std::fs::write(
+        &motor,
+        r#"{"R": 0.3, "L": 3e-7, "k": 0.15, "f": 0.05, "J": 1, "Ts": 0.03}"#,
+    )
+    .unwrap();
+    let path = dir.join("p.csv");
+    let run = |quiet: bool, duration: &str| {
+        let mut args = vec!["simulate", "--motor", motor.to_str().unwrap()];
+        args.extend(["--voltage", "40", "--solver", "ode", "--duration", duration]);
+        args.extend(["-o", path.to_str().unwrap()]);
+        if quiet {
+            args.push("--quiet");
+        }
+        let out = motorid(&args);
+        assert!(out.status.success(), "{}", stderr(&out));
+        stderr(&out)
+    };
+    let long = run(false, "1");
+    let started = long
+        .lines()
+        .find(|l| l.starts_with("  simulate: simulating 1001 samples (stick-slip ODE) ("))
+        .unwrap_or_else(|| panic!("no progress: {long}"));
+    // The first report comes after about a second, never before.
+    let at: f64 = started
+        .rsplit('(')
+        .next()
+        .and_then(|t| t.strip_suffix(" s)"))
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("`{started}`"));
+    assert!(at >= 1.0, "{long}");
+    assert!(
+        long.lines()
+            .last()
+            .unwrap_or_default()
+            .starts_with("wrote 1001 samples"),
+        "{long}"
+    );
+    assert_eq!(run(true, "0.5"), "", "--quiet printed");
+    let short = run(false, "0.01");
+    assert!(!short.contains("simulate:"), "{short}");
+}
+
 /// A study whose every run fails (records of 0.05 s: the steps are far from settled) exits
 /// with code 3 and no table; the progress counts the failures instead of calling them
 /// identified.
