@@ -382,6 +382,39 @@ fn long_simulations_report_progress_unless_quiet() {
     assert!(!short.contains("simulate:"), "{short}");
 }
 
+/// Records of 10 samples (9 ms) end long before the current settles: the paper's method says
+/// the record is too short, with the settling time from the current's rise (Eq. (10): 5 τe,
+/// τe = L/R = 1 s for the paper's motor), instead of blaming the step voltage.
+#[test]
+fn ten_sample_records_are_called_too_short() {
+    let dir = scratch("short");
+    let (hv, lv) = (dir.join("hv.csv"), dir.join("lv.csv"));
+    for (path, volts) in [(&hv, "40"), (&lv, "2.5")] {
+        let out = motorid(&[
+            "simulate",
+            "--voltage",
+            volts,
+            "--duration",
+            "0.009",
+            "-o",
+            path.to_str().unwrap(),
+        ]);
+        assert!(out.status.success(), "{}", stderr(&out));
+    }
+    assert_bad_input(
+        &[
+            "identify",
+            "--high",
+            hv.to_str().unwrap(),
+            "--low",
+            lv.to_str().unwrap(),
+            "--method",
+            "paper",
+        ],
+        "low-voltage test: record too short: 10 samples (0.009 s) end before the current settles, the current needs about 5.000 s to settle (5 τe, τe ≈ 1.000 s from its rise, Eq. (10))",
+    );
+}
+
 /// A study whose every run fails (records of 0.05 s: the steps are far from settled) exits
 /// with code 3 and no table; the progress counts the failures instead of calling them
 /// identified.
