@@ -41,7 +41,25 @@ impl TestPlan {
     fn duration_ms(&self) -> u64 {
         (self.duration_s * 1000.0).round() as u64
     }
+
+    /// Refuses a test the logger cannot store: more samples than its flash holds
+    /// ([`FLASH_SAMPLES`]), before anything is sent or allocated.
+    pub fn check(&self) -> Result<(), AcquireError> {
+        let samples = self.samples();
+        if samples > FLASH_SAMPLES || self.duration_ms() > u64::from(u32::MAX) {
+            return Err(AcquireError::Refused(format!(
+                "{} s at {} Hz is {samples} samples; the logger's 16 Mbit flash holds at most {FLASH_SAMPLES} ({} bytes a sample): shorten the test or lower the rate",
+                crate::settings::shown(self.duration_s),
+                self.rate_hz,
+                daq_emu::SAMPLE_BYTES
+            )));
+        }
+        Ok(())
+    }
 }
+
+/// Samples the logger's flash holds: 16 Mbit at [`daq_emu::SAMPLE_BYTES`] a sample.
+pub const FLASH_SAMPLES: u64 = (daq_emu::FLASH_BYTES / daq_emu::SAMPLE_BYTES) as u64;
 
 /// Where an acquisition stands, for progress.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -428,13 +446,8 @@ pub fn acquire<L: Link>(
     plan: &TestPlan,
     mut progress: impl FnMut(&Stats),
 ) -> Result<Acquired, AcquireError> {
+    plan.check()?;
     let expected = plan.samples();
-    if expected > u64::from(u32::MAX) || plan.duration_ms() > u64::from(u32::MAX) {
-        return Err(AcquireError::Refused(format!(
-            "{} s at {} Hz is beyond what the logger counts",
-            plan.duration_s, plan.rate_hz
-        )));
-    }
     let mut s = Session {
         link,
         decoder: Decoder::new(),

@@ -32,7 +32,7 @@ pub fn motor(spec: &str) -> Result<MotorParams> {
     params
         .validate()
         .map_err(|e| BadInput(format!("{}: {e}", path.display())))?;
-    sane_params(&params).map_err(|e| BadInput(format!("{}: {e}", path.display())))?;
+    sane_motor(&params).map_err(|e| BadInput(format!("{}: {e}", path.display())))?;
     Ok(params)
 }
 
@@ -47,7 +47,7 @@ pub const PARAM_MAX_SI: f64 = 1e6;
 
 /// Refuses parameters outside [`PARAM_MIN_SI`, `PARAM_MAX_SI`] (Ts: from zero), naming the
 /// first one.
-fn sane_params(p: &MotorParams) -> std::result::Result<(), String> {
+pub fn sane_motor(p: &MotorParams) -> std::result::Result<(), String> {
     let named = [
         ("R", p.r_ohm, "Ω"),
         ("L", p.l_henry, "H"),

@@ -495,6 +495,20 @@ fn acquisition_options_are_checked() {
             "--voltage -12: outside the logger's calibrated voltage range -10 to 10 V (from ",
         ),
         (
+            vec![
+                "acquire",
+                "--port",
+                "/no/such/tty",
+                "--voltage",
+                "40",
+                "--duration",
+                "1e6",
+                "-o",
+                o,
+            ],
+            "--duration: 1000000 s at 1000 Hz is 1000000001 samples; the logger's 16 Mbit flash holds at most 349525 (6 bytes a sample)",
+        ),
+        (
             vec!["emulate", "--pty", "--faults", "ber"],
             "--faults: `ber` is not KEY=VALUE",
         ),
@@ -527,6 +541,8 @@ fn settings_are_checked_before_the_first_run() {
     let huge = huge_r.to_str().unwrap();
     let x = dir.join("x.csv");
     let o = x.to_str().unwrap();
+    let fleet_dir = dir.join("fleet");
+    let fleet = fleet_dir.to_str().unwrap();
     let mc = |extra: &[&'static str]| {
         let mut v = vec!["montecarlo", "--runs", "2"];
         v.extend_from_slice(extra);
@@ -611,9 +627,21 @@ fn settings_are_checked_before_the_first_run() {
             vec!["emulate", "--pty", "--faults", "drop=1.5"],
             "--faults drop: 1.5 is not a probability",
         ),
+        (
+            vec!["fleet", "--out", fleet, "--spread", "1e300"],
+            "--spread 1e300: expected a factor from 1 to 100",
+        ),
+        (
+            vec!["fleet", "--out", fleet, "--low-voltage", "0.001"],
+            "motor_001: --low-voltage 0.001: the rotor never breaks away",
+        ),
     ];
     for (args, needle) in cases {
         assert_bad_input(&args, needle);
     }
     assert!(!x.exists(), "a refused simulation wrote its output");
+    assert!(
+        !fleet_dir.join("motor_001").join("low.csv").exists(),
+        "a refused fleet wrote records"
+    );
 }

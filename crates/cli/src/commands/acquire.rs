@@ -217,6 +217,14 @@ pub fn run(a: &AcquireArgs) -> Result<()> {
         ))
         .into());
     }
+    let plan = TestPlan {
+        volts,
+        duration_s: a.duration,
+        rate_hz: a.rate,
+        live: a.live,
+    };
+    plan.check()
+        .map_err(|e| BadInput(format!("--duration: {e}")))?;
     if let Some(what) = not_a_serial_port(&a.port) {
         return Err(BadInput(format!(
             "--port {}: not a serial port ({what}); give the logger's port, e.g. /dev/ttyUSB0, or the PTY path `motorid emulate --pty` prints",
@@ -229,12 +237,6 @@ pub fn run(a: &AcquireArgs) -> Result<()> {
         .open()
         .map_err(|e| BadInput(format!("--port {}: cannot open ({e})", a.port)))?;
     let mut link = SerialLink(port);
-    let plan = TestPlan {
-        volts,
-        duration_s: a.duration,
-        rate_hz: a.rate,
-        live: a.live,
-    };
     let mut progress = Progress::new(a.duration);
     let result = acquire(&mut link, &plan, |stats| {
         if !a.quiet {
