@@ -558,6 +558,14 @@ fn settings_are_checked_before_the_first_run() {
             "--duration 50 at --rate 1e9: 5.0000000001e10 samples; at most 10000000 fit in memory",
         ),
         (mc(&["--adc-bits", "0"]), "--adc-bits 0: expected 1 to 24 bits"),
+        (
+            vec!["montecarlo", "--runs", "0"],
+            "--runs 0: expected 1 to 1000000 record pairs",
+        ),
+        (
+            vec!["montecarlo", "--runs", "1000000000000"],
+            "--runs 1000000000000: expected 1 to 1000000 record pairs",
+        ),
         (mc(&["--adc-bits", "30"]), "--adc-bits 30: expected 1 to 24 bits"),
         // The paper's motor breaks away above R·Ts/k = 0.3 · 0.03 / 0.15 = 0.06 V.
         (

@@ -13,6 +13,9 @@ use crate::commands::identify::{step_from_record, LoadedStep};
 use crate::settings;
 use crate::{BadInput, NotConverged};
 
+/// Most record pairs a study may ask for (200 take about 10 s on 2 cores; a million, a day).
+const MAX_RUNS: usize = 1_000_000;
+
 /// Outcome of one record pair.
 struct Run {
     /// `None` where the paper's method does not apply (e.g. an underdamped motor).
@@ -115,8 +118,12 @@ fn median_abs(xs: impl Iterator<Item = f64>) -> f64 {
 }
 
 pub fn run(a: &MontecarloArgs) -> Result<()> {
-    if a.runs == 0 {
-        return Err(BadInput("--runs 0: give at least one run".into()).into());
+    if a.runs == 0 || a.runs > MAX_RUNS {
+        return Err(BadInput(format!(
+            "--runs {}: expected 1 to {MAX_RUNS} record pairs",
+            a.runs
+        ))
+        .into());
     }
     // Every setting is checked before the first run: a study whose runs cannot succeed is
     // refused with what to fix, not run into a table of NaN.
