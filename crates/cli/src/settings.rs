@@ -268,6 +268,9 @@ pub struct InputSpec<'a> {
     pub step_at: f64,
     /// `--duration` \[s\].
     pub duration: f64,
+    /// `--rate` \[Hz\]: a sine above half of it, or PRBS bits shorter than a sample, would
+    /// alias.
+    pub rate: f64,
 }
 
 /// The input waveform: a step of `--voltage` at `--step-at`, `--sine AMP,FREQ`, a staircase
@@ -302,6 +305,14 @@ pub fn input(spec: InputSpec<'_>) -> Result<Input> {
     } else if let Some(s) = spec.sine {
         let (amp, freq) = pair("--sine", s)?;
         volts("--sine amplitude", amp)?;
+        if freq > 0.5 * spec.rate {
+            return Err(BadInput(format!(
+                "--sine {s}: {} Hz is above half the sample rate ({} Hz): the record would alias it; raise --rate or lower the frequency",
+                shown(freq),
+                shown(0.5 * spec.rate)
+            ))
+            .into());
+        }
         Input::sine(amp, freq)
     } else if let Some(text) = spec.levels {
         let steps = text
@@ -339,6 +350,14 @@ pub fn input(spec: InputSpec<'_>) -> Result<Input> {
             Some(p) => p.parse::<u64>().ok(),
         };
         match (parts.len(), number(0), number(1), seed) {
+            (2 | 3, _, Some(bit), _) if bit < 1.0 / spec.rate => {
+                return Err(BadInput(format!(
+                    "--prbs {text}: a bit of {} s is shorter than the sample period {} s: bits would fall between samples; lengthen the bit or raise --rate",
+                    shown(bit),
+                    shown(1.0 / spec.rate)
+                ))
+                .into())
+            }
             (2 | 3, Some(v), Some(bit), Some(seed)) => {
                 Input::prbs(volts("--prbs", v)?, bit, spec.step_at, spec.duration, seed)
             }

@@ -608,6 +608,14 @@ fn settings_are_checked_before_the_first_run() {
             "the first level starts at 60 s, not before the end of the 50 s record",
         ),
         (
+            vec!["simulate", "--sine", "10,1e7", "-o", o],
+            "--sine 10,1e7: 1e7 Hz is above half the sample rate (500 Hz): the record would alias it",
+        ),
+        (
+            vec!["simulate", "--prbs", "20,0.0001", "-o", o],
+            "--prbs 20,0.0001: a bit of 0.0001 s is shorter than the sample period 0.001 s",
+        ),
+        (
             vec!["simulate", "--voltage", "1e300", "-o", o],
             "--voltage 1e300: expected a voltage between -1e5 and 1e5 V",
         ),

@@ -179,6 +179,7 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
         prbs: a.prbs.as_deref(),
         step_at: a.step_at,
         duration: duration_s,
+        rate: rate_hz,
     })?;
     let effects = settings::effects(&a.effects)?;
     let phases = Phases::start(a.quiet);
