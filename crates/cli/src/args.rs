@@ -352,6 +352,9 @@ pub struct SimulateArgs {
     /// Output CSV (record format of SPEC section 4); `-` or absent: standard output.
     #[arg(short = 'o', long = "output", value_name = "FILE.csv")]
     pub output: Option<PathBuf>,
+    /// No progress or summary on standard error (errors are still reported).
+    #[arg(long, short = 'q')]
+    pub quiet: bool,
 }
 
 /// The measurement chain: how the logger sees the plant.

@@ -41,11 +41,43 @@ impl TestPlan {
     fn duration_ms(&self) -> u64 {
         (self.duration_s * 1000.0).round() as u64
     }
+
+    /// Refuses a test the logger cannot store: more samples than its flash holds
+    /// ([`FLASH_SAMPLES`]), before anything is sent or allocated.
+    pub fn check(&self) -> Result<(), AcquireError> {
+        let samples = self.samples();
+        if samples > FLASH_SAMPLES || self.duration_ms() > u64::from(u32::MAX) {
+            return Err(AcquireError::Refused(format!(
+                "{} s at {} Hz is {samples} samples; the logger's 16 Mbit flash holds at most {FLASH_SAMPLES} ({} bytes a sample): shorten the test or lower the rate",
+                crate::settings::shown(self.duration_s),
+                self.rate_hz,
+                daq_emu::SAMPLE_BYTES
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Samples the logger's flash holds: 16 Mbit at [`daq_emu::SAMPLE_BYTES`] a sample.
+pub const FLASH_SAMPLES: u64 = (daq_emu::FLASH_BYTES / daq_emu::SAMPLE_BYTES) as u64;
+
+/// Where an acquisition stands, for progress.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Phase {
+    /// Talking to the logger before the test (status, stop, configure, arm).
+    #[default]
+    Setup,
+    /// The step test runs on the logger (live blocks may arrive).
+    Test,
+    /// The test is over; the samples not yet received are being dumped.
+    Dump,
 }
 
 /// Counters for progress and for the report.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Stats {
+    /// Where the acquisition stands.
+    pub phase: Phase,
     /// Bytes received.
     pub bytes: u64,
     /// Frames received intact.
@@ -115,6 +147,8 @@ struct Session<'l, L: Link> {
     last_reply_seq: Option<u8>,
     stats: Stats,
     inbox: std::collections::VecDeque<Got>,
+    /// When a byte last arrived (or the session began).
+    last_heard: Instant,
 }
 
 impl<L: Link> Session<'_, L> {
@@ -145,6 +179,9 @@ impl<L: Link> Session<'_, L> {
             .recv(&mut buf, timeout)
             .map_err(AcquireError::Io)?;
         self.stats.bytes += n as u64;
+        if n > 0 {
+            self.last_heard = Instant::now();
+        }
         let before = self.inbox.len();
         for &b in &buf[..n] {
             match self.decoder.feed(b) {
@@ -212,10 +249,19 @@ impl<L: Link> Session<'_, L> {
             }
         }
         Err(AcquireError::Silent(format!(
-            "the logger did not answer {command:?} after {ATTEMPTS} attempts ({} bytes, {} frames received)",
-            self.stats.bytes, self.stats.frames
+            "the logger timed out: no reply to {command:?} after {ATTEMPTS} attempts of {} ms, nothing heard for {:.1} s ({} bytes, {} frames received)",
+            REPLY_TIMEOUT.as_millis(),
+            self.last_heard.elapsed().as_secs_f64(),
+            self.stats.bytes,
+            self.stats.frames
         )))
     }
+}
+
+/// The samples not received: how many, and the first.
+fn missing(samples: &[Option<Sample>]) -> (usize, usize) {
+    let count = samples.iter().filter(|x| x.is_none()).count();
+    (count, samples.iter().position(Option::is_none).unwrap_or(0))
 }
 
 /// The samples of a test and the counters of the transfer.
@@ -274,6 +320,7 @@ fn collect<L: Link>(
     let mut last_status = Instant::now();
     let mut finished = false;
     let mut silent_since = Instant::now();
+    s.stats.phase = Phase::Test;
     while !finished {
         if s.pump(Duration::from_millis(50))? {
             silent_since = Instant::now();
@@ -309,13 +356,16 @@ fn collect<L: Link>(
             > Duration::from_secs(5) + test_time.saturating_sub(started.elapsed())
         {
             return Err(AcquireError::Silent(format!(
-                "the logger went silent during the test ({} of {expected} samples received, {} bytes)",
-                s.stats.samples, s.stats.bytes
+                "the logger timed out during the test: no reply for {:.1} s ({} of {expected} samples received, {} bytes) — nothing written",
+                silent_since.elapsed().as_secs_f64(),
+                s.stats.samples,
+                s.stats.bytes
             )));
         }
     }
     // Dump what is missing (everything in record mode), from the first missing sample to the
     // last, until nothing is; give up after rounds that recover nothing.
+    s.stats.phase = Phase::Dump;
     let mut stalled = 0;
     let mut round = 0u64;
     while stalled < STALLED_ROUNDS {
@@ -348,9 +398,12 @@ fn collect<L: Link>(
         );
         match acked {
             Ok(()) => {}
-            Err(AcquireError::Silent(_)) => {
-                stalled = STALLED_ROUNDS;
-                continue;
+            // A logger that stopped answering: say so, rather than that samples were lost.
+            Err(AcquireError::Silent(why)) => {
+                let (count, first) = missing(samples);
+                return Err(AcquireError::Silent(format!(
+                    "{why}; {count} of {expected} samples not received (first missing: sample {first}) — nothing written"
+                )));
             }
             Err(e) => return Err(e),
         }
@@ -393,13 +446,8 @@ pub fn acquire<L: Link>(
     plan: &TestPlan,
     mut progress: impl FnMut(&Stats),
 ) -> Result<Acquired, AcquireError> {
+    plan.check()?;
     let expected = plan.samples();
-    if expected > u64::from(u32::MAX) || plan.duration_ms() > u64::from(u32::MAX) {
-        return Err(AcquireError::Refused(format!(
-            "{} s at {} Hz is beyond what the logger counts",
-            plan.duration_s, plan.rate_hz
-        )));
-    }
     let mut s = Session {
         link,
         decoder: Decoder::new(),
@@ -410,6 +458,7 @@ pub fn acquire<L: Link>(
             ..Stats::default()
         },
         inbox: Default::default(),
+        last_heard: Instant::now(),
     };
     // Where the logger stands: stop anything left running.
     s.request(Command::Status, |g| match g {
@@ -470,10 +519,9 @@ pub fn acquire<L: Link>(
     match collect(&mut s, plan, &mut samples, &mut progress) {
         Ok(()) => {}
         Err(AcquireError::Io(e)) => {
-            let missing = samples.iter().filter(|x| x.is_none()).count();
-            let first = samples.iter().position(Option::is_none).unwrap_or(0);
+            let (count, first) = missing(&samples);
             return Err(AcquireError::Lost(format!(
-                "the serial line failed ({e}) with {missing} of {expected} samples not received (first missing: sample {first}) — nothing written"
+                "the serial line failed ({e}) with {count} of {expected} samples not received (first missing: sample {first}) — nothing written"
             )));
         }
         Err(e) => return Err(e),

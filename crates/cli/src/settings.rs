@@ -32,7 +32,212 @@ pub fn motor(spec: &str) -> Result<MotorParams> {
     params
         .validate()
         .map_err(|e| BadInput(format!("{}: {e}", path.display())))?;
+    sane_motor(&params).map_err(|e| BadInput(format!("{}: {e}", path.display())))?;
     Ok(params)
+}
+
+/// Smallest value of R, L, k, f, J accepted \[SI units\]: a micro-motor's inertia is about
+/// 1e-9 kg·m² and its inductance 1e-6 H; below 1e-12 a value is a unit mistake, and the
+/// derived constants (τe = L/R, ωn, …) lose all precision.
+pub const PARAM_MIN_SI: f64 = 1e-12;
+/// Largest value of R, L, k, f, J, Ts accepted \[SI units\]: far above any servomotor or
+/// linear axis (the EMPS axis: 95 kg, 215 N·s/m); above it a value is a unit mistake, and
+/// the products the models form (k², R·f, E/R) overflow into meaningless digits.
+pub const PARAM_MAX_SI: f64 = 1e6;
+
+/// Refuses parameters outside [`PARAM_MIN_SI`, `PARAM_MAX_SI`] (Ts: from zero), naming the
+/// first one.
+pub fn sane_motor(p: &MotorParams) -> std::result::Result<(), String> {
+    let named = [
+        ("R", p.r_ohm, "Ω"),
+        ("L", p.l_henry, "H"),
+        ("k", p.k_nm_per_a, "N·m/A"),
+        ("f", p.f_nms_per_rad, "N·m·s/rad"),
+        ("J", p.j_kgm2, "kg·m²"),
+        ("Ts", p.ts_nm, "N·m"),
+    ];
+    for (name, value, unit) in named {
+        // Ts may be zero (no dry friction) or as small as a fit leaves it.
+        let min = if name == "Ts" { 0.0 } else { PARAM_MIN_SI };
+        if !(min..=PARAM_MAX_SI).contains(&value) {
+            return Err(format!(
+                "{name} = {} {unit} is outside the range of physical motors this tool handles ({PARAM_MIN_SI:e} to {PARAM_MAX_SI:e} {unit}); check the units",
+                shown(value)
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// `v` as typed for ordinary magnitudes (`40`, `0.01`), in exponent form beyond them (`1e300`),
+/// so that a message never echoes 300 digits.
+pub fn shown(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() || (1e-4..1e7).contains(&v.abs()) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
+/// Largest armature voltage accepted \[V\]: ten times a 10 kV traction motor; more is a typo
+/// (`1e300`), and currents and speeds computed from it overflow into meaningless digits.
+pub const MAX_VOLTS: f64 = 1e5;
+
+/// A voltage \[V\] of `option`: finite and at most [`MAX_VOLTS`] in magnitude.
+pub fn volts(option: &str, v: f64) -> Result<f64> {
+    if v.is_finite() && v.abs() <= MAX_VOLTS {
+        Ok(v)
+    } else {
+        Err(BadInput(format!(
+            "{option} {}: expected a voltage between -{MAX_VOLTS:e} and {MAX_VOLTS:e} V",
+            shown(v)
+        ))
+        .into())
+    }
+}
+
+/// A length of time \[s\] of `option`: finite and greater than zero.
+pub fn duration(option: &str, s: f64) -> Result<f64> {
+    if s.is_finite() && s > 0.0 {
+        Ok(s)
+    } else {
+        Err(BadInput(format!(
+            "{option} {}: expected a record length greater than 0 s",
+            shown(s)
+        ))
+        .into())
+    }
+}
+
+/// A sample rate \[Hz\] of `option`: finite and greater than zero.
+pub fn rate(option: &str, hz: f64) -> Result<f64> {
+    if hz.is_finite() && hz > 0.0 {
+        Ok(hz)
+    } else {
+        Err(BadInput(format!(
+            "{option} {}: expected a sample rate greater than 0 Hz",
+            shown(hz)
+        ))
+        .into())
+    }
+}
+
+/// Validated `--duration` \[s\] and `--rate` \[Hz\] of a simulated record, refused before anything
+/// is allocated when the record would exceed [`motor_model::MAX_SAMPLES`].
+pub fn record_grid(duration_s: f64, rate_hz: f64) -> Result<(f64, f64)> {
+    let duration_s = duration("--duration", duration_s)?;
+    let rate_hz = rate("--rate", rate_hz)?;
+    let samples = (duration_s * rate_hz).floor() + 1.0;
+    if samples > motor_model::MAX_SAMPLES as f64 {
+        return Err(BadInput(format!(
+            "--duration {} at --rate {}: {} samples; at most {} fit in memory: shorten the record or lower the rate (e.g. --rate {})",
+            shown(duration_s),
+            shown(rate_hz),
+            shown(samples),
+            motor_model::MAX_SAMPLES,
+            ((motor_model::MAX_SAMPLES - 1) as f64 / duration_s).floor()
+        ))
+        .into());
+    }
+    Ok((duration_s, rate_hz))
+}
+
+/// A probability of `option`: a number in \[0, 1\].
+pub fn probability(option: &str, p: f64) -> Result<f64> {
+    if (0.0..=1.0).contains(&p) {
+        Ok(p)
+    } else {
+        Err(BadInput(format!(
+            "{option}: {} is not a probability: expected a number from 0 to 1",
+            shown(p)
+        ))
+        .into())
+    }
+}
+
+/// ADC resolution \[bits\] of `option`: 1 to 24 (the paper's logger: 10).
+pub fn adc_bits(option: &str, bits: u8) -> Result<Adc> {
+    if (1..=24).contains(&bits) {
+        Ok(Adc { bits })
+    } else {
+        Err(BadInput(format!("{option} {bits}: expected 1 to 24 bits")).into())
+    }
+}
+
+/// The step voltage `volts` of `option` for `motor` recorded for `duration_s` \[s\]: sane
+/// ([`volts`]), and high enough for the rotor to break away within the record, Eq. (11):
+/// `|E| > R Ts/k` and `t0 = −τe ln(1 − R Ts/(k E)) < duration`.
+pub fn breakaway_step(
+    option: &str,
+    motor: &MotorParams,
+    volts_v: f64,
+    duration_s: f64,
+) -> Result<f64> {
+    let volts_v = volts(option, volts_v)?;
+    let threshold = motor.r_ohm * motor.ts_nm / motor.k_nm_per_a;
+    match motor_model::breakaway_time(motor, volts_v) {
+        None => Err(BadInput(format!(
+            "{option} {}: the rotor never breaks away: this motor needs |E| > R·Ts/k = {threshold:.4} V (Eq. (11)); raise the step voltage",
+            shown(volts_v)
+        ))
+        .into()),
+        Some(t0) if t0 >= duration_s => Err(BadInput(format!(
+            "{option} {}: the rotor breaks away only at t0 = {t0:.3} s (Eq. (11)), after the {duration_s} s record ends; raise the step voltage above R·Ts/k = {threshold:.4} V or lengthen --duration",
+            shown(volts_v)
+        ))
+        .into()),
+        Some(_) => Ok(volts_v),
+    }
+}
+
+/// How the simulated logger of `montecarlo`, `fleet` and `demo` records a step test.
+#[derive(Debug, Clone, Copy)]
+pub struct Logger {
+    /// Record length \[s\].
+    pub duration_s: f64,
+    /// Sample rate \[Hz\].
+    pub rate_hz: f64,
+    /// ADC resolution \[bits\].
+    pub adc_bits: u8,
+    /// Noise on the analog channels \[LSB\].
+    pub noise_lsb: f64,
+    /// Encoder counts per revolution.
+    pub encoder_cpr: u32,
+}
+
+impl Logger {
+    /// A logger from its options, each checked: `--duration` and `--rate` ([`record_grid`]),
+    /// `--adc-bits` 1–24, `--noise-lsb` ≥ 0, `--encoder-cpr` > 0.
+    pub fn new(
+        duration_s: f64,
+        rate_hz: f64,
+        adc_bits_n: u8,
+        noise_lsb: f64,
+        encoder_cpr: u32,
+    ) -> Result<Logger> {
+        let (duration_s, rate_hz) = record_grid(duration_s, rate_hz)?;
+        let adc = adc_bits("--adc-bits", adc_bits_n)?;
+        if !(noise_lsb.is_finite() && noise_lsb >= 0.0) {
+            return Err(BadInput(format!(
+                "--noise-lsb {}: expected zero or more LSBs",
+                shown(noise_lsb)
+            ))
+            .into());
+        }
+        if encoder_cpr == 0 {
+            return Err(BadInput(
+                "--encoder-cpr 0: expected a positive count per revolution".into(),
+            )
+            .into());
+        }
+        Ok(Logger {
+            duration_s,
+            rate_hz,
+            adc_bits: adc.bits,
+            noise_lsb,
+            encoder_cpr,
+        })
+    }
 }
 
 /// Two comma-separated numbers, e.g. `0.1,0.05`.
@@ -63,6 +268,9 @@ pub struct InputSpec<'a> {
     pub step_at: f64,
     /// `--duration` \[s\].
     pub duration: f64,
+    /// `--rate` \[Hz\]: a sine above half of it, or PRBS bits shorter than a sample, would
+    /// alias.
+    pub rate: f64,
 }
 
 /// The input waveform: a step of `--voltage` at `--step-at`, `--sine AMP,FREQ`, a staircase
@@ -80,10 +288,31 @@ pub fn input(spec: InputSpec<'_>) -> Result<Input> {
         )
         .into());
     }
+    let end = spec.duration;
+    // A step or PRBS that starts at or after the end of the record would leave it all zeros.
+    if (spec.voltage.is_some() || spec.prbs.is_some())
+        && !(spec.step_at.is_finite() && spec.step_at >= 0.0 && spec.step_at < end)
+    {
+        return Err(BadInput(format!(
+            "--step-at {}: expected an instant from 0 s to before the end of the {} s record (--duration); a later step leaves the record all zeros",
+            shown(spec.step_at),
+            shown(end)
+        ))
+        .into());
+    }
     let input = if let Some(v) = spec.voltage {
-        Input::step(v, spec.step_at)
+        Input::step(volts("--voltage", v)?, spec.step_at)
     } else if let Some(s) = spec.sine {
         let (amp, freq) = pair("--sine", s)?;
+        volts("--sine amplitude", amp)?;
+        if freq > 0.5 * spec.rate {
+            return Err(BadInput(format!(
+                "--sine {s}: {} Hz is above half the sample rate ({} Hz): the record would alias it; raise --rate or lower the frequency",
+                shown(freq),
+                shown(0.5 * spec.rate)
+            ))
+            .into());
+        }
         Input::sine(amp, freq)
     } else if let Some(text) = spec.levels {
         let steps = text
@@ -100,6 +329,17 @@ pub fn input(spec: InputSpec<'_>) -> Result<Input> {
                     })
             })
             .collect::<std::result::Result<Vec<(f64, f64)>, _>>()?;
+        for &(_, v) in &steps {
+            volts("--levels", v)?;
+        }
+        if let Some(&(first, _)) = steps.first().filter(|(t, _)| t.is_nan() || *t >= end) {
+            return Err(BadInput(format!(
+                "--levels: the first level starts at {} s, not before the end of the {} s record (--duration): the record would be all zeros",
+                shown(first),
+                shown(end)
+            ))
+            .into());
+        }
         Input::piecewise(&steps)
     } else {
         let text = spec.prbs.unwrap_or_default();
@@ -110,8 +350,16 @@ pub fn input(spec: InputSpec<'_>) -> Result<Input> {
             Some(p) => p.parse::<u64>().ok(),
         };
         match (parts.len(), number(0), number(1), seed) {
-            (2 | 3, Some(volts), Some(bit), Some(seed)) => {
-                Input::prbs(volts, bit, spec.step_at, spec.duration, seed)
+            (2 | 3, _, Some(bit), _) if bit < 1.0 / spec.rate => {
+                return Err(BadInput(format!(
+                    "--prbs {text}: a bit of {} s is shorter than the sample period {} s: bits would fall between samples; lengthen the bit or raise --rate",
+                    shown(bit),
+                    shown(1.0 / spec.rate)
+                ))
+                .into())
+            }
+            (2 | 3, Some(v), Some(bit), Some(seed)) => {
+                Input::prbs(volts("--prbs", v)?, bit, spec.step_at, spec.duration, seed)
             }
             _ => {
                 return Err(BadInput(format!(
@@ -128,9 +376,12 @@ pub fn input(spec: InputSpec<'_>) -> Result<Input> {
 pub fn effects(specs: &[String]) -> Result<Effects> {
     let mut set = Effects::none();
     for spec in specs {
-        let effect: Effect = spec
-            .parse()
-            .map_err(|e| BadInput(format!("--effect {e}")))?;
+        let effect: Effect = spec.parse().map_err(|e| match e {
+            motor_model::ModelError::EffectSpec { reason, .. } => {
+                BadInput(format!("--effect {spec}: {reason}"))
+            }
+            other => BadInput(format!("--effect {spec}: {other}")),
+        })?;
         set = set.with(effect);
     }
     Ok(set)
@@ -149,15 +400,7 @@ fn range(option: &str, text: Option<&str>) -> Result<Option<Range>> {
 pub fn measurement(a: &MeasurementArgs, trace: &Trace) -> Result<MeasurementModel> {
     let adc = a
         .adc_bits
-        .map(|bits| {
-            if (1..=24).contains(&bits) {
-                Ok(Adc { bits })
-            } else {
-                Err(BadInput(format!(
-                    "--adc-bits {bits}: expected 1 to 24 bits"
-                )))
-            }
-        })
+        .map(|bits| adc_bits("--adc-bits", bits))
         .transpose()?;
     if a.encoder_cpr == Some(0) {
         return Err(

@@ -160,8 +160,9 @@ fn faulty_lines_give_right_samples_or_a_clear_error_and_no_file() {
         let out = acquire(&emulator.port, "40", &path, &[]);
         let err = stderr(&out);
         assert!(out.status.success(), "{faults}: {err}");
+        let report = err.lines().last().unwrap_or_default();
         assert!(
-            !err.contains(" 0 retries"),
+            report.starts_with("wrote ") && !report.contains(" 0 retries"),
             "{faults}: no retransmission? {err}"
         );
         assert_eq!(rows(&path), rows(&reference), "{faults}");
@@ -183,4 +184,92 @@ fn faulty_lines_give_right_samples_or_a_clear_error_and_no_file() {
         .filter(|e| e.file_name().to_string_lossy().contains(".tmp"))
         .collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+/// A logger that stops answering (the emulator stopped with SIGSTOP one second into a 3 s
+/// real-time test): the error says it timed out and after how long with no reply, exit code
+/// 1, and no file.
+#[test]
+fn a_logger_that_stops_answering_is_reported_as_timed_out() {
+    let dir = scratch("acquire-silent");
+    let emulator = Emulator::start(&["--realtime"]);
+    let pid = emulator.child.id().to_string();
+    let path = dir.join("silent.csv");
+    let acquiring = Command::new(env!("CARGO_BIN_EXE_motorid"))
+        .args(["acquire", "--port", &emulator.port, "--voltage", "40"])
+        .args(["--duration", "3", "-o", path.to_str().unwrap()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("acquire starts");
+    std::thread::sleep(std::time::Duration::from_secs(1));
+    let stopped = Command::new("kill").args(["-STOP", &pid]).status().unwrap();
+    assert!(stopped.success());
+    let out = acquiring.wait_with_output().unwrap();
+    let _ = Command::new("kill").args(["-CONT", &pid]).status();
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    let last = err.lines().last().unwrap_or_default();
+    assert!(last.contains("the logger timed out"), "{err}");
+    // "no reply for 6.2 s" during the test, "nothing heard for 5.2 s" after it.
+    let seconds: f64 = last
+        .split(" for ")
+        .nth(1)
+        .and_then(|rest| rest.split(" s").next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no time in `{last}`"));
+    assert!(seconds >= 3.0, "{last}");
+    assert!(last.contains("nothing written"), "{last}");
+    assert!(!path.exists(), "a file was written");
+}
+
+/// Progress of a record-mode acquisition (stderr not a terminal: a line a second): during the
+/// test the time left in the test, during the dump a time left from the measured throughput
+/// that is never more than twice what the dump really took, and a second.
+#[test]
+fn acquisition_progress_tells_the_time_left() {
+    let dir = scratch("acquire-progress");
+    let emulator = Emulator::start(&["--realtime"]);
+    let path = dir.join("progress.csv");
+    let mut args = vec!["acquire", "--port", &emulator.port, "--voltage", "40"];
+    args.extend(["--duration", "3", "-o", path.to_str().unwrap()]);
+    let out = motorid(&args);
+    let err = stderr(&out);
+    assert!(out.status.success(), "{err}");
+    // Every progress line ends in the time since the start, "(2.1 s)".
+    let elapsed = |line: &str| -> f64 {
+        line.rsplit('(')
+            .next()
+            .and_then(|t| t.strip_suffix(" s)"))
+            .and_then(|t| t.parse().ok())
+            .unwrap_or_else(|| panic!("no elapsed time in `{line}`"))
+    };
+    let lines: Vec<&str> = err.lines().filter(|l| l.contains(" samples, ")).collect();
+    assert!(lines.len() >= 3, "{err}");
+    let testing: Vec<&str> = lines
+        .iter()
+        .copied()
+        .filter(|l| l.contains("test running, "))
+        .collect();
+    assert!(!testing.is_empty(), "{err}");
+    assert!(testing.iter().all(|l| !l.contains("ETA")), "{err}");
+    assert!(testing[0].contains("test running, 3 s left"), "{err}");
+    let end = elapsed(lines[lines.len() - 1]);
+    for line in &lines {
+        if let Some(eta) = line
+            .split("ETA ")
+            .nth(1)
+            .and_then(|r| r.split(" s").next())
+            .and_then(|n| n.parse::<f64>().ok())
+        {
+            // Twice the truth and a second: the throughput of a loaded machine varies, and
+            // this still catches an ETA that counts the test in (39 s for a 1.8 s dump).
+            let really = end - elapsed(line);
+            assert!(
+                eta <= 2.0 * really + 1.0,
+                "ETA {eta} s, took {really} s: {line}\n{err}"
+            );
+        }
+    }
+    assert!(lines[lines.len() - 1].contains("ETA 0.0 s"), "{err}");
 }

@@ -368,6 +368,11 @@ fn acquisition_options_are_checked() {
         b"{\"voltage\": [5, -5], \"current\": [0, 1], \"speed\": [0, 1], \"counts_per_rev\": 10}",
     );
     let typo_cal = write(&dir, "typo.json", b"{\"volts\": [0, 1]}");
+    let small_cal = write(
+        &dir,
+        "small.json",
+        b"{\"voltage\": [-10, 10], \"current\": [-20, 20], \"speed\": [-50, 50], \"counts_per_rev\": 500}",
+    );
     let cases: Vec<(Vec<&str>, &str)> = vec![
         (
             vec![
@@ -446,6 +451,64 @@ fn acquisition_options_are_checked() {
             "unknown field `volts`",
         ),
         (
+            vec![
+                "acquire",
+                "--port",
+                "/dev/null",
+                "--voltage",
+                "40",
+                "--duration",
+                "1",
+                "-o",
+                o,
+            ],
+            "--port /dev/null: not a serial port (a device that is not a terminal); give the logger's port, e.g. /dev/ttyUSB0, or the PTY path `motorid emulate --pty` prints",
+        ),
+        (
+            vec![
+                "acquire",
+                "--port",
+                "/no/such/tty",
+                "--voltage",
+                "1000",
+                "--duration",
+                "1",
+                "-o",
+                o,
+            ],
+            "--voltage 1000: outside the logger's calibrated voltage range -50 to 50 V",
+        ),
+        (
+            vec![
+                "acquire",
+                "--port",
+                "/no/such/tty",
+                "--voltage",
+                "-12",
+                "--duration",
+                "1",
+                "--calibration",
+                small_cal.to_str().unwrap(),
+                "-o",
+                o,
+            ],
+            "--voltage -12: outside the logger's calibrated voltage range -10 to 10 V (from ",
+        ),
+        (
+            vec![
+                "acquire",
+                "--port",
+                "/no/such/tty",
+                "--voltage",
+                "40",
+                "--duration",
+                "1e6",
+                "-o",
+                o,
+            ],
+            "--duration: 1000000 s at 1000 Hz is 1000000001 samples; the logger's 16 Mbit flash holds at most 349525 (6 bytes a sample)",
+        ),
+        (
             vec!["emulate", "--pty", "--faults", "ber"],
             "--faults: `ber` is not KEY=VALUE",
         ),
@@ -462,4 +525,139 @@ fn acquisition_options_are_checked() {
         assert_bad_input(&args, needle);
     }
     assert!(!out.exists());
+}
+
+/// Settings that cannot give a meaningful result are refused before any work, exit code 2,
+/// with what to fix: a Monte Carlo study whose every run would fail, a record that would be
+/// all zeros, physically absurd voltages and motors, a probability above 1.
+#[test]
+fn settings_are_checked_before_the_first_run() {
+    let dir = scratch("settings");
+    let huge_r = write(
+        &dir,
+        "huge_r.json",
+        br#"{"R": 1e308, "L": 0.3, "k": 0.15, "f": 0.05, "J": 1, "Ts": 0.03}"#,
+    );
+    let huge = huge_r.to_str().unwrap();
+    let x = dir.join("x.csv");
+    let o = x.to_str().unwrap();
+    let fleet_dir = dir.join("fleet");
+    let fleet = fleet_dir.to_str().unwrap();
+    let mc = |extra: &[&'static str]| {
+        let mut v = vec!["montecarlo", "--runs", "2"];
+        v.extend_from_slice(extra);
+        v
+    };
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            mc(&["--duration", "0"]),
+            "--duration 0: expected a record length greater than 0 s",
+        ),
+        (
+            mc(&["--rate", "1e9"]),
+            "--duration 50 at --rate 1e9: 5.0000000001e10 samples; at most 10000000 fit in memory",
+        ),
+        (mc(&["--adc-bits", "0"]), "--adc-bits 0: expected 1 to 24 bits"),
+        (
+            vec!["montecarlo", "--runs", "0"],
+            "--runs 0: expected 1 to 1000000 record pairs",
+        ),
+        (
+            vec!["montecarlo", "--runs", "1000000000000"],
+            "--runs 1000000000000: expected 1 to 1000000 record pairs",
+        ),
+        (mc(&["--adc-bits", "30"]), "--adc-bits 30: expected 1 to 24 bits"),
+        // The paper's motor breaks away above R·Ts/k = 0.3 · 0.03 / 0.15 = 0.06 V.
+        (
+            mc(&["--low-voltage", "0.01"]),
+            "--low-voltage 0.01: the rotor never breaks away: this motor needs |E| > R·Ts/k = 0.0600 V",
+        ),
+        // At 0.07 V, Eq. (11): t0 = −1 s · ln(1 − 0.06/0.07) = 1.946 s.
+        (
+            mc(&["--low-voltage", "0.07", "--duration", "1"]),
+            "breaks away only at t0 = 1.946 s (Eq. (11)), after the 1 s record ends",
+        ),
+        (
+            mc(&["--high-voltage", "1e300"]),
+            "--high-voltage 1e300: expected a voltage between -1e5 and 1e5 V",
+        ),
+        (
+            vec![
+                "simulate",
+                "--voltage",
+                "40",
+                "--step-at",
+                "100",
+                "--duration",
+                "50",
+                "-o",
+                o,
+            ],
+            "--step-at 100: expected an instant from 0 s to before the end of the 50 s record",
+        ),
+        (
+            vec![
+                "simulate",
+                "--levels",
+                "60:40",
+                "--duration",
+                "50",
+                "-o",
+                o,
+            ],
+            "the first level starts at 60 s, not before the end of the 50 s record",
+        ),
+        (
+            vec!["simulate", "--sine", "10,1e7", "-o", o],
+            "--sine 10,1e7: 1e7 Hz is above half the sample rate (500 Hz): the record would alias it",
+        ),
+        (
+            vec!["simulate", "--prbs", "20,0.0001", "-o", o],
+            "--prbs 20,0.0001: a bit of 0.0001 s is shorter than the sample period 0.001 s",
+        ),
+        (
+            vec!["simulate", "--voltage", "1e300", "-o", o],
+            "--voltage 1e300: expected a voltage between -1e5 and 1e5 V",
+        ),
+        (
+            vec!["simulate", "--voltage", "-2e5", "-o", o],
+            "--voltage -200000: expected a voltage between",
+        ),
+        (
+            vec!["simulate", "--voltage", "40", "--rate", "NaN", "-o", o],
+            "--rate NaN: expected a sample rate greater than 0 Hz",
+        ),
+        (
+            vec!["simulate", "--voltage", "40", "--motor", huge, "-o", o],
+            "R = 1e308 Ω is outside the range of physical motors this tool handles (1e-12 to 1e6 Ω)",
+        ),
+        (
+            vec!["model", "--motor", huge],
+            "R = 1e308 Ω is outside the range",
+        ),
+        (
+            vec!["emulate", "--pty", "--faults", "ber=2"],
+            "--faults ber: 2 is not a probability: expected a number from 0 to 1",
+        ),
+        (
+            vec!["emulate", "--pty", "--faults", "drop=1.5"],
+            "--faults drop: 1.5 is not a probability",
+        ),
+        (
+            vec!["fleet", "--out", fleet, "--spread", "1e300"],
+            "--spread 1e300: expected a factor from 1 to 100",
+        ),
+        (
+            vec!["fleet", "--out", fleet, "--low-voltage", "0.001"],
+            "motor_001: --low-voltage 0.001: the rotor never breaks away",
+        ),
+    ];
+    for (args, needle) in cases {
+        assert_bad_input(&args, needle);
+    }
+    assert!(!x.exists(), "a refused simulation wrote its output");
+    assert!(
+        !fleet_dir.join("motor_001").join("low.csv").exists(),
+        "a refused fleet wrote records"
+    );
 }

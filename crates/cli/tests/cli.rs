@@ -185,11 +185,11 @@ fn bad_input_gives_one_line_errors_and_exit_code_2() {
         (vec!["simulate", "--duration", "1"], "give one input"),
         (
             vec!["simulate", "--voltage", "1", "--duration", "-1"],
-            "duration = -1",
+            "--duration -1: expected a record length greater than 0 s",
         ),
         (
             vec!["simulate", "--voltage", "1", "--rate", "0"],
-            "sample rate = 0",
+            "--rate 0: expected a sample rate greater than 0 Hz",
         ),
         (
             vec![
@@ -201,13 +201,33 @@ fn bad_input_gives_one_line_errors_and_exit_code_2() {
                 "--rate",
                 "1e6",
             ],
-            "at most 10,000,000 samples",
+            "1e15 samples; at most 10000000 fit in memory",
         ),
         (vec!["simulate", "--sine", "0.1"], "two numbers"),
         (vec!["simulate", "--sine", "0.1,-2"], "sine frequency = -2"),
         (
             vec!["simulate", "--voltage", "1", "--effect", "warp_drive:x=1"],
             "unknown effect",
+        ),
+        (
+            vec![
+                "simulate",
+                "--voltage",
+                "1",
+                "--effect",
+                "cogging_torque:amp=0.01,amp=0.02",
+            ],
+            "--effect cogging_torque:amp=0.01,amp=0.02: key `amp` given twice; give each key once",
+        ),
+        (
+            vec![
+                "simulate",
+                "--voltage",
+                "1",
+                "--effect",
+                "cogging_torque:amp=0.01,phase",
+            ],
+            "`phase` is not of the form key=value",
         ),
         (
             vec![
@@ -313,6 +333,107 @@ fn montecarlo_small_version() {
         assert!(full < paper, "{p}");
         assert!(coverage >= 18.0 / 24.0, "{p}");
     }
+}
+
+/// A long simulation reports its phase on standard error (here about 6 s: a 1 µs electrical
+/// time constant makes the ODE take 25 ns steps); a short one and `--quiet` do not.
+#[test]
+fn long_simulations_report_progress_unless_quiet() {
+    let dir = scratch("progress");
+    let motor = dir.join("fast.json");
+    std::fs::write(
+        &motor,
+        r#"{"R": 0.3, "L": 3e-7, "k": 0.15, "f": 0.05, "J": 1, "Ts": 0.03}"#,
+    )
+    .unwrap();
+    let path = dir.join("p.csv");
+    let run = |quiet: bool, duration: &str| {
+        let mut args = vec!["simulate", "--motor", motor.to_str().unwrap()];
+        args.extend(["--voltage", "40", "--solver", "ode", "--duration", duration]);
+        args.extend(["-o", path.to_str().unwrap()]);
+        if quiet {
+            args.push("--quiet");
+        }
+        let out = motorid(&args);
+        assert!(out.status.success(), "{}", stderr(&out));
+        stderr(&out)
+    };
+    let long = run(false, "1");
+    let started = long
+        .lines()
+        .find(|l| l.starts_with("  simulate: simulating 1001 samples (stick-slip ODE) ("))
+        .unwrap_or_else(|| panic!("no progress: {long}"));
+    // The first report comes after about a second, never before.
+    let at: f64 = started
+        .rsplit('(')
+        .next()
+        .and_then(|t| t.strip_suffix(" s)"))
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("`{started}`"));
+    assert!(at >= 1.0, "{long}");
+    assert!(
+        long.lines()
+            .last()
+            .unwrap_or_default()
+            .starts_with("wrote 1001 samples"),
+        "{long}"
+    );
+    assert_eq!(run(true, "0.5"), "", "--quiet printed");
+    let short = run(false, "0.01");
+    assert!(!short.contains("simulate:"), "{short}");
+}
+
+/// Records of 10 samples (9 ms) end long before the current settles: the paper's method says
+/// the record is too short, with the settling time from the current's rise (Eq. (10): 5 τe,
+/// τe = L/R = 1 s for the paper's motor), instead of blaming the step voltage.
+#[test]
+fn ten_sample_records_are_called_too_short() {
+    let dir = scratch("short");
+    let (hv, lv) = (dir.join("hv.csv"), dir.join("lv.csv"));
+    for (path, volts) in [(&hv, "40"), (&lv, "2.5")] {
+        let out = motorid(&[
+            "simulate",
+            "--voltage",
+            volts,
+            "--duration",
+            "0.009",
+            "-o",
+            path.to_str().unwrap(),
+        ]);
+        assert!(out.status.success(), "{}", stderr(&out));
+    }
+    assert_bad_input(
+        &[
+            "identify",
+            "--high",
+            hv.to_str().unwrap(),
+            "--low",
+            lv.to_str().unwrap(),
+            "--method",
+            "paper",
+        ],
+        "low-voltage test: record too short: 10 samples (0.009 s) end before the current settles, the current needs about 5.000 s to settle (5 τe, τe ≈ 1.000 s from its rise, Eq. (10))",
+    );
+}
+
+/// A study whose every run fails (records of 0.05 s: the steps are far from settled) exits
+/// with code 3 and no table; the progress counts the failures instead of calling them
+/// identified.
+#[test]
+fn montecarlo_runs_that_fail_are_counted_and_give_exit_code_3() {
+    let out = motorid(&["montecarlo", "--runs", "2", "--duration", "0.05"]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(3), "{err}");
+    assert!(
+        err.contains("2/2 record pairs done: 0 identified, 2 failed"),
+        "{err}"
+    );
+    assert!(!err.contains("2/2 record pairs identified"), "{err}");
+    assert!(
+        err.contains("error: all 2 runs failed; nothing to report. The first: run 0"),
+        "{err}"
+    );
+    assert!(!stdout(&out).contains("NaN"), "{}", stdout(&out));
 }
 
 /// The identify command on simulated records of the paper's motor: noise-free records give

@@ -114,9 +114,44 @@ pub fn check_step_test(label: &str, t: &StepTest<'_>) -> Result<(), FitError> {
         (None, None) => true,
     };
     if !moved {
+        // A current still rising means the record ended too early to tell: the rotor may
+        // only start later. Only a settled current at rest shows the friction holds.
+        if check_settled_for(label, "current", t.current, t.dt, "").is_err() {
+            return Err(bad(label, record_too_short(t.current, t.dt)));
+        }
         return Err(bad(label, format!("the rotor never moves: the {} V step does not break the Coulomb friction (|E| ≤ R Ts/k, Eq. (11)); raise the step voltage", t.volts)));
     }
     Ok(())
+}
+
+/// Why a record whose current is still rising is too short, with the time the current needs
+/// to settle where its rise shows it: at rest it follows Eq. (10), `I = E/R (1 − e^(−t/τe))`,
+/// so the rise over the second half of the record is `e^(−T/(2τe))` times that over the first
+/// half, and the current is within 1 % of E/R after about 5 τe.
+fn record_too_short(current: &[f64], dt: f64) -> String {
+    let n = current.len();
+    let span_s = dt * (n - 1) as f64;
+    let half = (n - 1) / 2;
+    let (first, mid, last) = (current[0], current[half], current[2 * half]);
+    let ratio = (last - mid) / (mid - first);
+    let tau_e = -(dt * half as f64) / ratio.ln();
+    let needs = if ratio > 0.0 && ratio < 1.0 && tau_e.is_finite() {
+        let seconds = |x: f64| {
+            if x >= 1e-3 {
+                format!("{x:.3}")
+            } else {
+                format!("{x:.2e}")
+            }
+        };
+        format!(
+            ", the current needs about {} s to settle (5 τe, τe ≈ {} s from its rise, Eq. (10))",
+            seconds(5.0 * tau_e),
+            seconds(tau_e)
+        )
+    } else {
+        String::new()
+    };
+    format!("record too short: {n} samples ({span_s:.3} s) end before the current settles{needs}; record until current and speed are steady")
 }
 
 /// Whether the record's end is a steady state, as the paper's method assumes (it reads Irm,

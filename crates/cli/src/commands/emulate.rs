@@ -28,8 +28,8 @@ fn faults(text: &str) -> Result<LineFaults> {
                 })
         };
         match key {
-            "ber" => f.bit_error_rate = number(value)?.min(1.0),
-            "drop" => f.drop_rate = number(value)?.min(1.0),
+            "ber" => f.bit_error_rate = settings::probability("--faults ber", number(value)?)?,
+            "drop" => f.drop_rate = settings::probability("--faults drop", number(value)?)?,
             "close" => f.close_after = Some(number(value)? as u64),
             "seed" => f.seed = number(value)? as u64,
             _ => {

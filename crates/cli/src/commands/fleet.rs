@@ -20,6 +20,8 @@ use crate::{settings, BadInput};
 const SAMPLES: f64 = 2000.0;
 /// Record length in slow time constants.
 const TIME_CONSTANTS: f64 = 8.0;
+/// Largest `--spread`: parameters from a hundredth to a hundred times the base motor's.
+const MAX_SPREAD: f64 = 100.0;
 /// Pre-trigger samples before each step.
 const PRE_TRIGGER: f64 = 5.0;
 
@@ -40,13 +42,15 @@ pub fn run(a: &FleetArgs) -> Result<()> {
     if a.motors == 0 || a.motors > 100_000 {
         return Err(BadInput(format!("--motors {}: expected 1 to 100000", a.motors)).into());
     }
-    if !(a.spread.is_finite() && a.spread >= 1.0) {
+    if !(a.spread.is_finite() && (1.0..=MAX_SPREAD).contains(&a.spread)) {
         return Err(BadInput(format!(
-            "--spread {}: expected a factor of at least 1",
-            a.spread
+            "--spread {}: expected a factor from 1 to {MAX_SPREAD}",
+            settings::shown(a.spread)
         ))
         .into());
     }
+    settings::volts("--high-voltage", a.high_voltage)?;
+    settings::volts("--low-voltage", a.low_voltage)?;
     let base = settings::motor(&a.motor.motor)?;
     std::fs::create_dir_all(&a.out)
         .map_err(|e| BadInput(format!("cannot create {}: {e}", a.out.display())))?;
@@ -58,7 +62,18 @@ pub fn run(a: &FleetArgs) -> Result<()> {
             .values()
             .map(|v| v * a.spread.powf(2.0 * rng.uniform() - 1.0));
         let motor = MotorParams::from_values(values).map_err(|e| BadInput(e.to_string()))?;
+        let name = format!("motor_{:0width$}", m + 1);
+        settings::sane_motor(&motor)
+            .map_err(|e| BadInput(format!("{name}: {e}; lower --spread")))?;
         let (duration, rate) = record_timing(&motor);
+        // Each drawn motor must break away within its records, or its low step is useless.
+        for (option, volts) in [
+            ("--high-voltage", a.high_voltage),
+            ("--low-voltage", a.low_voltage),
+        ] {
+            settings::breakaway_step(option, &motor, volts, duration)
+                .map_err(|e| BadInput(format!("{name}: {e:#}")))?;
+        }
         let logger = Logger {
             duration_s: duration,
             rate_hz: rate,
@@ -66,7 +81,7 @@ pub fn run(a: &FleetArgs) -> Result<()> {
             noise_lsb: 1.0,
             encoder_cpr: 2000,
         };
-        let dir = a.out.join(format!("motor_{:0width$}", m + 1));
+        let dir = a.out.join(&name);
         std::fs::create_dir_all(&dir)?;
         output::write(
             &dir.join("motor.json"),

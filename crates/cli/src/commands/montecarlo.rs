@@ -1,6 +1,8 @@
 //! `motorid montecarlo`: how accurate are the two methods, and are the full method's 95 %
 //! intervals honest? Many noisy record pairs of one motor, identified by both methods.
 
+use std::sync::atomic::{AtomicUsize, Ordering};
+
 use anyhow::Result;
 use fit::{identify_full, identify_paper, steady_state_start, LmSettings, PARAM_NAMES};
 use motor_model::{MeasurementModel, MotorParams, Record, StepResponse};
@@ -9,7 +11,10 @@ use serde_json::json;
 use crate::args::{MeasurementArgs, MontecarloArgs, SpeedFromArg};
 use crate::commands::identify::{step_from_record, LoadedStep};
 use crate::settings;
-use crate::BadInput;
+use crate::{BadInput, NotConverged};
+
+/// Most record pairs a study may ask for (200 take about 10 s on 2 cores; a million, a day).
+const MAX_RUNS: usize = 1_000_000;
 
 /// Outcome of one record pair.
 struct Run {
@@ -22,32 +27,7 @@ struct Run {
     stop: Option<String>,
 }
 
-/// How the simulated logger records a step test.
-#[derive(Debug, Clone, Copy)]
-pub struct Logger {
-    /// Record length \[s\].
-    pub duration_s: f64,
-    /// Sample rate \[Hz\].
-    pub rate_hz: f64,
-    /// ADC resolution \[bits\].
-    pub adc_bits: u8,
-    /// Noise on the analog channels \[LSB\].
-    pub noise_lsb: f64,
-    /// Encoder counts per revolution.
-    pub encoder_cpr: u32,
-}
-
-impl From<&MontecarloArgs> for Logger {
-    fn from(a: &MontecarloArgs) -> Self {
-        Logger {
-            duration_s: a.duration,
-            rate_hz: a.rate,
-            adc_bits: a.adc_bits,
-            noise_lsb: a.noise_lsb,
-            encoder_cpr: a.encoder_cpr,
-        }
-    }
-}
+pub use crate::settings::Logger;
 
 /// A step of `volts` at `at_s` \[s\] on `motor` recorded by `logger` with noise seed `seed`,
 /// with the measurement chain used.
@@ -82,11 +62,20 @@ pub fn record(logger: &Logger, motor: &MotorParams, volts: f64, seed: u64) -> Re
     step_from_record(format!("simulated {volts} V record (seed {seed})"), rec)
 }
 
-fn one_run(a: &MontecarloArgs, motor: &MotorParams, i: usize) -> Result<Run> {
-    let seed = a.seed.wrapping_add(2 * i as u64);
-    let logger = Logger::from(a);
-    let hv = record(&logger, motor, a.high_voltage, seed)?;
-    let lv = record(&logger, motor, a.low_voltage, seed.wrapping_add(1))?;
+/// The validated settings of a Monte Carlo study.
+struct Study {
+    motor: MotorParams,
+    logger: Logger,
+    high_voltage_v: f64,
+    low_voltage_v: f64,
+    seed: u64,
+}
+
+fn one_run(study: &Study, i: usize) -> Result<Run> {
+    let seed = study.seed.wrapping_add(2 * i as u64);
+    let (logger, motor) = (&study.logger, &study.motor);
+    let hv = record(logger, motor, study.high_voltage_v, seed)?;
+    let lv = record(logger, motor, study.low_voltage_v, seed.wrapping_add(1))?;
     let tests = [hv.test(), lv.test()];
     let truth = motor.values();
     let rel = |p: &MotorParams| {
@@ -107,15 +96,8 @@ fn one_run(a: &MontecarloArgs, motor: &MotorParams, i: usize) -> Result<Run> {
         covered: full
             .ci95
             .map(|ci| std::array::from_fn(|k| ci[k][0] <= truth[k] && truth[k] <= ci[k][1])),
-        converged: full.termination.converged(),
-        stop: (!full.termination.converged()).then(|| {
-            format!(
-                "run {i}: {} after {} iterations, weighted cost {:.6e}",
-                full.termination.text(),
-                full.iterations,
-                full.cost
-            )
-        }),
+        converged: full.accepted(),
+        stop: full.failure().map(|why| format!("run {i}: {why}")),
     })
 }
 
@@ -129,19 +111,55 @@ fn median_abs(xs: impl Iterator<Item = f64>) -> f64 {
 }
 
 pub fn run(a: &MontecarloArgs) -> Result<()> {
-    if a.runs == 0 {
-        return Err(BadInput("--runs 0: give at least one run".into()).into());
+    if a.runs == 0 || a.runs > MAX_RUNS {
+        return Err(BadInput(format!(
+            "--runs {}: expected 1 to {MAX_RUNS} record pairs",
+            a.runs
+        ))
+        .into());
     }
+    // Every setting is checked before the first run: a study whose runs cannot succeed is
+    // refused with what to fix, not run into a table of NaN.
     let motor = settings::motor(&a.motor.motor)?;
+    let logger = Logger::new(a.duration, a.rate, a.adc_bits, a.noise_lsb, a.encoder_cpr)?;
+    let study = Study {
+        high_voltage_v: settings::breakaway_step(
+            "--high-voltage",
+            &motor,
+            a.high_voltage,
+            logger.duration_s,
+        )?,
+        low_voltage_v: settings::breakaway_step(
+            "--low-voltage",
+            &motor,
+            a.low_voltage,
+            logger.duration_s,
+        )?,
+        motor,
+        logger,
+        seed: a.seed,
+    };
     let threads = crate::parallel::threads(a.runs);
     let started = std::time::Instant::now();
+    let identified = AtomicUsize::new(0);
+    let failed = AtomicUsize::new(0);
     let results = crate::parallel::map(
         a.runs,
-        |i| one_run(a, &motor, i),
+        |i| {
+            let result = one_run(&study, i);
+            let counter = if result.is_ok() { &identified } else { &failed };
+            counter.fetch_add(1, Ordering::Relaxed);
+            result
+        },
         |n| {
             if !a.json && (n % (a.runs / 10).max(1) == 0 || n == a.runs) {
+                let (ok, bad) = (
+                    identified.load(Ordering::Relaxed),
+                    failed.load(Ordering::Relaxed),
+                );
                 eprintln!(
-                    "  {n}/{} record pairs identified ({:.1} s)",
+                    "  {}/{} record pairs done: {ok} identified, {bad} failed ({:.1} s)",
+                    ok + bad,
                     a.runs,
                     started.elapsed().as_secs_f64()
                 );
@@ -155,6 +173,14 @@ pub fn run(a: &MontecarloArgs) -> Result<()> {
             Ok(run) => runs.push(run),
             Err(e) => failures.push(e.to_string()),
         }
+    }
+    if runs.is_empty() {
+        let first = failures.first().map_or("", String::as_str);
+        return Err(NotConverged(format!(
+            "all {} runs failed; nothing to report. The first: {first}",
+            a.runs
+        ))
+        .into());
     }
     let elapsed = started.elapsed().as_secs_f64();
     let truth = motor.values();
@@ -182,11 +208,11 @@ pub fn run(a: &MontecarloArgs) -> Result<()> {
             })).collect::<Vec<_>>(),
         });
         println!("{}", serde_json::to_string_pretty(&report)?);
-        return Ok(());
+        return failed_runs(&failures, a.runs);
     }
     println!(
         "Monte Carlo: {} record pairs ({} V and {} V steps, {} s at {} Hz; {}-bit ADC, {} LSB noise, encoder {} counts/rev, speed from the encoder)",
-        runs.len(), a.high_voltage, a.low_voltage, a.duration, a.rate, a.adc_bits, a.noise_lsb, a.encoder_cpr
+        runs.len(), study.high_voltage_v, study.low_voltage_v, a.duration, a.rate, a.adc_bits, a.noise_lsb, a.encoder_cpr
     );
     println!(
         "  param        truth   paper median |error|   full median |error|   full 95% CI coverage"
@@ -219,5 +245,18 @@ pub fn run(a: &MontecarloArgs) -> Result<()> {
             println!("  {f}");
         }
     }
-    Ok(())
+    failed_runs(&failures, a.runs)
+}
+
+/// Exit code 3 when any run failed: the table covers only the runs that succeeded.
+fn failed_runs(failures: &[String], runs: usize) -> Result<()> {
+    if failures.is_empty() {
+        return Ok(());
+    }
+    Err(NotConverged(format!(
+        "{} of {runs} runs failed: the results above cover the other {}",
+        failures.len(),
+        runs - failures.len()
+    ))
+    .into())
 }

@@ -1,5 +1,9 @@
 //! `motorid simulate`: a record of a simulated test.
 
+use std::io::IsTerminal;
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::{Duration, Instant};
+
 use anyhow::Result;
 use motor_model::{Effects, Input, MotorParams, Simulator, StepResponse, Trace};
 
@@ -7,6 +11,95 @@ use crate::args::{SimulateArgs, SolverArg};
 use crate::record_csv;
 use crate::settings;
 use crate::BadInput;
+
+/// Time a run may take before it reports progress: shorter runs stay silent.
+const PROGRESS_AFTER: Duration = Duration::from_secs(1);
+/// Interval between progress reports.
+const PROGRESS_EVERY: Duration = Duration::from_secs(1);
+
+/// The phase a long `simulate` is in, reported on standard error by a thread once the run has
+/// taken [`PROGRESS_AFTER`], then every [`PROGRESS_EVERY`] and at each new phase: one line
+/// rewritten on a terminal, plain lines otherwise. Dropping it ends the report.
+struct Phases {
+    shared: Arc<(Mutex<(String, bool)>, Condvar)>,
+    reporter: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Phases {
+    /// Starts reporting (nothing at all when `quiet`).
+    fn start(quiet: bool) -> Self {
+        let shared = Arc::new((Mutex::new((String::new(), false)), Condvar::new()));
+        let reporter = (!quiet).then(|| {
+            let shared = Arc::clone(&shared);
+            std::thread::spawn(move || report(&shared))
+        });
+        Phases { shared, reporter }
+    }
+
+    /// Enters the phase described by `what`.
+    fn enter(&self, what: String) {
+        let (state, changed) = &*self.shared;
+        if let Ok(mut s) = state.lock() {
+            s.0 = what;
+        }
+        changed.notify_all();
+    }
+}
+
+impl Drop for Phases {
+    fn drop(&mut self) {
+        let (state, changed) = &*self.shared;
+        if let Ok(mut s) = state.lock() {
+            s.1 = true;
+        }
+        changed.notify_all();
+        if let Some(reporter) = self.reporter.take() {
+            let _ = reporter.join();
+        }
+    }
+}
+
+/// The reporting thread of [`Phases`].
+fn report(shared: &(Mutex<(String, bool)>, Condvar)) {
+    let (state, changed) = shared;
+    let started = Instant::now();
+    let terminal = std::io::stderr().is_terminal();
+    let mut shown: Option<(String, Instant)> = None;
+    let Ok(mut s) = state.lock() else { return };
+    loop {
+        let wait = match &shown {
+            None => PROGRESS_AFTER.saturating_sub(started.elapsed()),
+            Some((_, at)) => PROGRESS_EVERY.saturating_sub(at.elapsed()),
+        };
+        s = match changed.wait_timeout(s, wait.max(Duration::from_millis(1))) {
+            Ok((guard, _)) => guard,
+            Err(_) => return,
+        };
+        if s.1 {
+            break;
+        }
+        let due = match &shown {
+            None => started.elapsed() >= PROGRESS_AFTER,
+            Some((phase, at)) => *phase != s.0 || at.elapsed() >= PROGRESS_EVERY,
+        };
+        if due && !s.0.is_empty() {
+            let line = format!(
+                "  simulate: {} ({:.1} s)",
+                s.0,
+                started.elapsed().as_secs_f64()
+            );
+            if terminal {
+                eprint!("\r{line:<78}");
+            } else {
+                eprintln!("{line}");
+            }
+            shown = Some((s.0.clone(), Instant::now()));
+        }
+    }
+    if terminal && shown.is_some() {
+        eprintln!();
+    }
+}
 
 /// Simulates `input` on `motor` with `effects`, choosing the solver: the exact analytic step
 /// response when asked for (or by default when it applies), the stick-slip ODE otherwise.
@@ -78,20 +171,44 @@ pub fn metadata(motor: &MotorParams, effects: &Effects, input: &Input) -> Vec<(S
 
 pub fn run(a: &SimulateArgs) -> Result<()> {
     let motor = settings::motor(&a.motor.motor)?;
+    let (duration_s, rate_hz) = settings::record_grid(a.duration, a.rate)?;
     let input = settings::input(settings::InputSpec {
         voltage: a.voltage,
         sine: a.sine.as_deref(),
         levels: a.levels.as_deref(),
         prbs: a.prbs.as_deref(),
         step_at: a.step_at,
-        duration: a.duration,
+        duration: duration_s,
+        rate: rate_hz,
     })?;
     let effects = settings::effects(&a.effects)?;
-    let trace = trace(&motor, effects, &input, a.solver, a.duration, a.rate)?;
+    let phases = Phases::start(a.quiet);
+    let samples = (duration_s * rate_hz).floor() as u64 + 1;
+    let analytic = matches!(
+        (a.solver, &input),
+        (None | Some(SolverArg::Analytic), Input::Step { .. })
+    ) && effects.is_nominal();
+    phases.enter(format!(
+        "simulating {samples} samples ({})",
+        if analytic {
+            "exact step response"
+        } else {
+            "stick-slip ODE"
+        }
+    ));
+    let trace = trace(&motor, effects, &input, a.solver, duration_s, rate_hz)?;
+    phases.enter(format!("measuring {samples} samples"));
     let measurement = settings::measurement(&a.measurement, &trace)?;
     let record = measurement
         .apply(&trace)
         .map_err(|e| BadInput(e.to_string()))?;
+    phases.enter(format!(
+        "writing {samples} samples to {}",
+        match a.output.as_deref() {
+            Some(path) if path.as_os_str() != "-" => path.display().to_string(),
+            _ => "standard output".into(),
+        }
+    ));
     let mut meta = metadata(&motor, &effects, &input);
     let ideal = measurement.adc.is_none()
         && measurement.noise_std.iter().all(|&s| s == 0.0)
@@ -107,6 +224,7 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     match a.output.as_deref() {
         Some(path) if path.as_os_str() != "-" => {
             record_csv::write_file(path, &record, &meta)?;
+            drop(phases);
             // Samples at a non-zero rail, as `identify` will find them (a signal at rest on a
             // unipolar range sits on its zero rail: that is not lost information).
             let clipped: usize = match measurement.adc {
@@ -127,6 +245,9 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
                 .sum(),
                 None => 0,
             };
+            if a.quiet {
+                return Ok(());
+            }
             eprintln!(
                 "wrote {} samples ({} s at {} Hz) to {}{}",
                 record.t.len(),
@@ -140,7 +261,10 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
                 }
             );
         }
-        _ => record_csv::write_file(std::path::Path::new("-"), &record, &meta)?,
+        _ => {
+            record_csv::write_file(std::path::Path::new("-"), &record, &meta)?;
+            drop(phases);
+        }
     }
     Ok(())
 }

@@ -185,8 +185,8 @@ impl fmt::Display for Effect {
     }
 }
 
-/// `key=value` pairs of one effect spec, consumed as they are read so that unknown keys are
-/// reported.
+/// `key=value` pairs of one effect spec (each key once), consumed as they are read so that
+/// unknown keys are reported.
 struct SpecArgs<'a> {
     spec: &'a str,
     pairs: Vec<(&'a str, f64)>,
@@ -208,7 +208,14 @@ impl<'a> SpecArgs<'a> {
                     value.trim()
                 ),
             })?;
-            pairs.push((key.trim(), value));
+            let key = key.trim();
+            if pairs.iter().any(|(k, _)| *k == key) {
+                return Err(ModelError::EffectSpec {
+                    spec: spec.to_string(),
+                    reason: format!("key `{key}` given twice; give each key once"),
+                });
+            }
+            pairs.push((key, value));
         }
         Ok(SpecArgs { spec, pairs })
     }
