@@ -201,3 +201,24 @@ fn an_encoder_moving_half_a_count_per_sample_still_identifies_the_motor() {
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
     assert_truth_in_intervals(&v, &TRUTH);
 }
+
+#[test]
+fn short_records_are_named_as_too_short() {
+    // 10-sample records: the paper method said the step "does not break the Coulomb friction …
+    // raise the step voltage" (R·Ts/k is 0.06 V), the full method that the "steady states are
+    // proportional".
+    let dir = scratch("short");
+    let (hv, lv) = (dir.join("hv.csv"), dir.join("lv.csv"));
+    simulate_to(&hv, &["--voltage", "40", "--duration", "0.009"]);
+    simulate_to(&lv, &["--voltage", "2.5", "--duration", "0.009"]);
+    let (h, l) = (hv.to_str().unwrap(), lv.to_str().unwrap());
+    for method in ["paper", "full"] {
+        let out = motorid(&["identify", "--high", h, "--low", l, "--method", method]);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{method}: {err}");
+        assert!(err.contains("too short"), "{method}: {err}");
+        assert!(!err.contains("raise the step voltage"), "{method}: {err}");
+        assert!(!err.contains("proportional"), "{method}: {err}");
+    }
+    common::assert_bad_input(&["identify", "--record", h], "too little motion");
+}

@@ -41,8 +41,27 @@ pub fn steady_state_start(
     };
     let (ih, il) = (tail_mean(high.current), tail_mean(low.current));
     let (oh, ol) = (tail_mean(wh), tail_mean(wl));
+    // The start reads steady values off the records' ends: where it fails, a record that has
+    // not settled is the likelier cause, and the one to name.
+    let unsettled = || {
+        [("high", high, wh), ("low", low, wl)]
+            .into_iter()
+            .flat_map(|(which, t, w)| [(which, "current", t.current, t.dt), (which, "speed", w, t.dt)])
+            .find_map(|(which, name, y, dt)| {
+                crate::checks::check_settled_for(
+                    &format!("{which}-voltage test"),
+                    name,
+                    y,
+                    dt,
+                    "the steady-state start needs settled records: record longer (several mechanical time constants)",
+                )
+                .err()
+            })
+    };
     let (r, k) = solve2(ih, oh, il, ol, high.volts, low.volts).ok_or_else(|| {
-        bad("the two tests' steady states are proportional: use two different voltages".into())
+        unsettled().unwrap_or_else(|| {
+            bad("the two tests' steady states are proportional: use two different voltages".into())
+        })
     })?;
     // k Ir = Ts + f Ωr for both tests.
     let (ts, f) = solve2(1.0, oh, 1.0, ol, k * ih, k * il)
@@ -64,8 +83,10 @@ pub fn steady_state_start(
         .map_or(f64::NAN, |i| high.t_first + i as f64 * high.dt);
     let j = rise * (r * f + k * k) / r;
     MotorParams::new(r, l, k, f, j, ts).map_err(|e| {
-        bad(format!(
-            "{e} (steady currents {ih:.4} / {il:.4} A, speeds {oh:.4} / {ol:.4} rad/s: did both records settle?)"
-        ))
+        unsettled().unwrap_or_else(|| {
+            bad(format!(
+                "{e} (steady currents {ih:.4} / {il:.4} A, speeds {oh:.4} / {ol:.4} rad/s)"
+            ))
+        })
     })
 }

@@ -478,6 +478,11 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
             .into())
         }
     };
+    if a.decimation == 0 {
+        return Err(
+            BadInput("--decimation 0: expected a factor of 1 (none) or more".into()).into(),
+        );
+    }
     let rec = read_mapped(path, &column_map(a)?, false)?;
     let shown = path.display();
     let position = rec.position.as_ref().ok_or_else(|| {
@@ -837,7 +842,9 @@ fn run_records(a: &IdentifyArgs) -> Result<()> {
     let given = a.start.as_deref().map(crate::settings::motor).transpose()?;
     let samples: usize = loaded.iter().map(|l| l.record.t.len()).sum();
     let clock = std::time::Instant::now();
-    if !a.quiet {
+    // About a second of fitting on this kind of machine: progress from there on.
+    let long = !a.quiet && samples >= 20_000;
+    if long {
         eprintln!(
             "fitting {} record(s), {samples} samples, by simulation (about 7 simulations per iteration)…",
             loaded.len()
@@ -849,7 +856,7 @@ fn run_records(a: &IdentifyArgs) -> Result<()> {
         &all,
         " (give a start with --start FILE.json)",
     )?;
-    if !a.quiet {
+    if long {
         eprintln!(
             "done in {:.1} s ({} iterations)",
             clock.elapsed().as_secs_f64(),
