@@ -360,10 +360,9 @@ impl WeightedProblem for OeProblem {
     }
 }
 
-/// Checks one record's channels and builds its fitted channels.
-fn prepare(k: usize, rec: &ExcitedRecord<'_>) -> Result<OeRecord, FitError> {
+/// Checks record `k` (0-based): aligned, finite channels of enough samples, a positive period.
+fn check_record(k: usize, rec: &ExcitedRecord<'_>) -> Result<(), FitError> {
     let label = format!("record {}", k + 1);
-    let n = rec.current.len();
     crate::checks::check_channels(
         &label,
         crate::checks::Channels {
@@ -380,6 +379,13 @@ fn prepare(k: usize, rec: &ExcitedRecord<'_>) -> Result<OeRecord, FitError> {
             format!("sample period {} s: expected a positive period", rec.dt),
         ));
     }
+    Ok(())
+}
+
+/// Checks one record's channels and builds its fitted channels.
+fn prepare(k: usize, rec: &ExcitedRecord<'_>) -> Result<OeRecord, FitError> {
+    check_record(k, rec)?;
+    let n = rec.current.len();
     let channel = |kind: Channel, full: Vec<f64>, mask: Option<&[bool]>| {
         let keep: Vec<usize> = (0..n).filter(|&i| !mask.is_some_and(|m| m[i])).collect();
         let data: Vec<f64> = keep.iter().map(|&i| full[i]).collect();
@@ -539,6 +545,7 @@ fn electrical_estimate(
     let mut atb = nalgebra::Vector3::<f64>::zeros();
     let mut per_record = Vec::new();
     for (k, rec) in records.iter().enumerate() {
+        check_record(k, rec)?;
         let n = rec.current.len();
         let dt = rec.dt;
         if n < crate::checks::MIN_SAMPLES || dt.is_nan() || dt <= 0.0 {

@@ -36,6 +36,8 @@ pub fn steady_state_start(
     high: &StepTest<'_>,
     low: &StepTest<'_>,
 ) -> Result<MotorParams, FitError> {
+    crate::checks::check_step_test("high-voltage test", high)?;
+    crate::checks::check_step_test("low-voltage test", low)?;
     let (Some(wh), Some(wl)) = (high.speed, low.speed) else {
         return Err(bad("both tests need a speed (or position) channel".into()));
     };
