@@ -1,5 +1,7 @@
 use std::fmt;
 
+use motor_model::ModelError;
+
 /// Every way an identification can refuse its input.
 ///
 /// A fit that runs but does not converge is *not* an error: it is a result whose
@@ -31,6 +33,14 @@ pub enum FitError {
         /// Why.
         reason: String,
     },
+    /// The motor model refused a value (parameters, an input waveform) that the identification
+    /// derived or was given.
+    Model {
+        /// What was being built (e.g. "start parameters", "voltage").
+        context: &'static str,
+        /// The model's own error.
+        source: ModelError,
+    },
     /// The optimiser itself failed (not a non-convergence: an internal error).
     Solver(String),
 }
@@ -47,9 +57,24 @@ impl fmt::Display for FitError {
             FitError::MethodDomain { equation, reason } => {
                 write!(f, "{equation} does not apply: {reason}")
             }
+            FitError::Model { context, source } => write!(f, "{context}: {source}"),
             FitError::Solver(msg) => write!(f, "optimiser failed: {msg}"),
         }
     }
 }
 
-impl std::error::Error for FitError {}
+impl std::error::Error for FitError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            FitError::Model { source, .. } => Some(source),
+            _ => None,
+        }
+    }
+}
+
+impl FitError {
+    /// A [`FitError::Model`] in `context`, for `map_err`.
+    pub(crate) fn model(context: &'static str) -> impl Fn(ModelError) -> FitError {
+        move |source| FitError::Model { context, source }
+    }
+}

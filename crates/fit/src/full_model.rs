@@ -366,10 +366,9 @@ pub fn identify_full(
     start: &MotorParams,
     settings: LmSettings,
 ) -> Result<FullFit, FitError> {
-    start.validate().map_err(|e| FitError::BadData {
-        series: "start parameters".into(),
-        reason: e.to_string(),
-    })?;
+    start
+        .validate()
+        .map_err(FitError::model("start parameters"))?;
     if start.ts_nm <= 0.0 {
         return Err(FitError::BadData {
             series: "start parameters".into(),
@@ -476,7 +475,7 @@ pub(crate) fn fit_weighted<P: WeightedProblem>(
     };
     let values: [f64; 6] = params_of::<f64>(&report.params, |v, _| v)
         .ok_or_else(|| FitError::Solver("parameters left the representable range".into()))?;
-    let params = MotorParams::from_values(values).map_err(|e| FitError::Solver(e.to_string()))?;
+    let params = MotorParams::from_values(values).map_err(FitError::model("fitted parameters"))?;
     // Intervals from the Newey–West sandwich (residuals of logged signals are rarely white),
     // then the delta method σ_p = p σ_θ back to SI units.
     let unc = problem

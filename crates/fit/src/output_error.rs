@@ -102,7 +102,7 @@ pub fn voltage_input(t: &[f64], voltage: &[f64]) -> Result<Input, FitError> {
     }
     let sampled = || Input::sampled(0.0, dt, voltage.to_vec());
     if starts.len() * MIN_SAMPLES_PER_LEVEL > voltage.len() {
-        return sampled().map_err(|e| bad("voltage", e.to_string()));
+        return sampled().map_err(FitError::model("voltage"));
     }
     let mut steps = Vec::with_capacity(starts.len());
     for (j, &s) in starts.iter().enumerate() {
@@ -112,11 +112,11 @@ pub fn voltage_input(t: &[f64], voltage: &[f64]) -> Result<Input, FitError> {
         let rms = (seg.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / seg.len() as f64).sqrt();
         if rms > 4.0 * sigma + 1e-3 * (hi - lo) {
             // Not flat between jumps (a sine, a ramp): replay the samples.
-            return sampled().map_err(|e| bad("voltage", e.to_string()));
+            return sampled().map_err(FitError::model("voltage"));
         }
         steps.push((t[s] - t[0], mean));
     }
-    Input::piecewise(&steps).map_err(|e| bad("voltage", e.to_string()))
+    Input::piecewise(&steps).map_err(FitError::model("voltage"))
 }
 
 /// A channel of one record: its data at the kept samples and its weight.
@@ -432,7 +432,7 @@ pub fn identify_output_error(
 ) -> Result<FullFit, FitError> {
     start
         .validate()
-        .map_err(|e| bad("start parameters", e.to_string()))?;
+        .map_err(FitError::model("start parameters"))?;
     if start.ts_nm <= 0.0 {
         return Err(bad(
             "start parameters",
@@ -664,5 +664,5 @@ fn equation_error_estimate(
         .flat_map(|r| r.current.iter())
         .fold(0.0f64, |m, i| m.max((k * i).abs()));
     let ts = if ts > 0.0 { ts } else { 1e-3 * peak_torque };
-    MotorParams::new(r, l, k, f, j, ts).map_err(|e| domain(e.to_string()))
+    MotorParams::new(r, l, k, f, j, ts).map_err(FitError::model("equation-error start (Eq. (2))"))
 }

@@ -270,7 +270,7 @@ pub fn identify_paper(
         hv.j_kgm2,
         lv.ts_nm,
     )
-    .map_err(|e| domain("Eqs. (38)-(48)", e.to_string()))?;
+    .map_err(FitError::model("Eqs. (38)-(48)"))?;
     let speed_check = motor_model::breakaway_time(&params, high.volts)
         .ok_or_else(|| {
             domain(
