@@ -463,13 +463,20 @@ fn metadata_rails(table: &Table) -> [Option<([f64; 2], f64)>; 3] {
 }
 
 /// A sample period at least this long \[s\] on a column `t` without a unit is taken for a
-/// time column in another unit: a DC motor record sampled once a second cannot show its
-/// transients (the paper's motor, the slowest here, has τe = 1 s).
-const MAX_PLAIN_PERIOD_S: f64 = 0.5;
+/// time column in ms: a motor record sampled below 100 Hz is rare (the electrical transient of
+/// a servomotor is over in milliseconds), while any logger up to 100 kHz whose times are in ms
+/// gives periods of 0.01 or more. Such a record is refused with the advice to state the unit,
+/// `t[ms]`, or `t[s]` to confirm seconds; `motorid` writes its records with units.
+const MAX_PLAIN_PERIOD_S: f64 = 0.01;
 /// A peak voltage × peak current above this \[W\] on a `current` column without a unit is
 /// taken for a current in mA: 100 kW is beyond any servomotor this tool is for (the paper's
 /// motor draws 2.1 kW at its 40 V step).
 const MAX_PLAIN_POWER_W: f64 = 1e5;
+/// A peak voltage over peak current below this \[Ω\] on a `current` column without a unit is
+/// taken for a current in mA too: a servomotor's armature is tenths of an ohm to tens of ohms
+/// (the paper's, 0.3 Ω, peaks at 40 V / 53.6 A = 0.75 Ω), and the same motor in mA reads a
+/// thousand times less.
+const MIN_PLAIN_OHM: f64 = 0.02;
 
 /// Refuses a record whose unit-less `t` or `current` column is implausible in SI units (a time
 /// in ms, a current in mA): the fit would converge to a motor scaled by 1000 in every
@@ -493,15 +500,17 @@ fn check_unit_plausibility(
     }
     let peak = |y: &[f64]| y.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let power = peak(&record.voltage) * peak(&record.current);
-    if !stated("current") && power > MAX_PLAIN_POWER_W {
+    let apparent_ohm = peak(&record.voltage) / peak(&record.current);
+    if !stated("current") && (power > MAX_PLAIN_POWER_W || apparent_ohm < MIN_PLAIN_OHM) {
         return Err((
             line,
             format!(
-                "the current peaks at {} A with {} V applied: {:.3e} W, beyond any servomotor. \
+                "the current peaks at {} A with {} V applied: {:.3e} W, {:.3e} Ω, beyond any servomotor. \
                  If the current is in mA, write `current[mA]` in the header; write `current[A]` to confirm amperes",
                 peak(&record.current),
                 peak(&record.voltage),
-                power
+                power,
+                apparent_ohm
             ),
         ));
     }
@@ -628,12 +637,13 @@ pub fn write_to(
     for (key, value) in metadata {
         writeln!(out, "# {key}: {value}")?;
     }
-    let mut header = String::from("t,voltage,current");
+    // Units in the header: the record states them, so no reader has to guess.
+    let mut header = String::from("t[s],voltage[V],current[A]");
     if record.speed.is_some() {
-        header.push_str(",speed");
+        header.push_str(",speed[rad/s]");
     }
     if record.position.is_some() {
-        header.push_str(",position");
+        header.push_str(",position[rad]");
     }
     writeln!(out, "{header}")?;
     let mut line = String::with_capacity(96);

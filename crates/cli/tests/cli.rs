@@ -70,7 +70,7 @@ fn simulate_reproduces_table_2_with_both_solvers() {
             let text = std::fs::read_to_string(&path).unwrap();
             assert!(text
                 .lines()
-                .any(|l| l == "t,voltage,current,speed,position"));
+                .any(|l| l == "t[s],voltage[V],current[A],speed[rad/s],position[rad]"));
             let row = last_row(&text);
             assert_eq!(row[0], 50.0);
             assert_eq!(

@@ -41,7 +41,10 @@ fn simulate_to(path: &Path, duration: &str) -> Output {
 /// per sample.
 fn assert_record(text: &str, duration_s: f64) {
     let mut lines = text.lines().filter(|l| !l.starts_with('#'));
-    assert_eq!(lines.next(), Some("t,voltage,current,speed,position"));
+    assert_eq!(
+        lines.next(),
+        Some("t[s],voltage[V],current[A],speed[rad/s],position[rad]")
+    );
     let rows = (duration_s * 1000.0).round() as usize + 1;
     assert_eq!(lines.count(), rows, "rows of the record");
 }

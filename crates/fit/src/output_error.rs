@@ -32,9 +32,10 @@ use crate::step_location::uniform_period;
 const FD_STEP: f64 = 1e-6;
 /// Fraction of the start's own RK4 step used for the whole fit (room for faster parameters).
 const STEP_MARGIN: f64 = 0.5;
-/// Most RK4 steps per record sample a simulation may take (a time constant 50 times below
-/// the sample period: 1/40 of it per step, with [`STEP_MARGIN`]).
-const MAX_STEPS_PER_SAMPLE: f64 = 4000.0;
+/// Most RK4 steps per record sample a simulation may take (a time constant 12.5 times below
+/// the sample period: 1/40 of it per step, with [`STEP_MARGIN`]); faster time constants are
+/// outside what the records show.
+const MAX_STEPS_PER_SAMPLE: f64 = 1000.0;
 /// A voltage is piecewise constant when it has at most one jump per this many samples.
 const MIN_SAMPLES_PER_LEVEL: usize = 20;
 
@@ -184,21 +185,28 @@ impl OeProblem {
     /// record: a time constant that far below the sample period is outside what the records
     /// show, and simulating it would take without bound.
     fn set_step_for(&self, values: [f64; 6]) -> Option<()> {
+        let h = self.within_work_bound(values)?;
+        self.max_step_bits.store(h.to_bits(), Ordering::Relaxed);
+        Some(())
+    }
+
+    /// The RK4 step for `values`, `None` where it would take more than
+    /// [`MAX_STEPS_PER_SAMPLE`] steps per sample of the fastest record.
+    fn within_work_bound(&self, values: [f64; 6]) -> Option<f64> {
         let h = step_for(values)?;
         let dt_min = self
             .records
             .iter()
             .map(|r| r.dt)
             .fold(f64::INFINITY, f64::min);
-        if h * MAX_STEPS_PER_SAMPLE < dt_min {
-            return None;
-        }
-        self.max_step_bits.store(h.to_bits(), Ordering::Relaxed);
-        Some(())
+        (h * MAX_STEPS_PER_SAMPLE >= dt_min).then_some(h)
     }
 
     /// The simulated channels of every record at `values`: `[record][channel][kept sample]`.
     fn simulate(&self, values: [f64; 6]) -> Option<Vec<Vec<Vec<f64>>>> {
+        // Every evaluation within the work bound, trial steps included: the simulator's own
+        // step follows the parameters' fastest time constant whatever the fixed step says.
+        self.within_work_bound(values)?;
         let params = MotorParams::from_values(values).ok()?;
         let mut out = Vec::with_capacity(self.records.len());
         for rec in &self.records {
@@ -448,7 +456,7 @@ pub fn identify_output_error(
     problem.set_step_for(start.values()).ok_or_else(|| {
         bad(
             "start parameters",
-            "a time constant (L/R or the mechanical one) more than 50 times below the sample period: \
+            "a time constant (L/R or the mechanical one) more than 12.5 times below the sample period: \
              the records cannot show it; give a start that matches them"
                 .into(),
         )
