@@ -6,7 +6,7 @@
 //! 0.2–5 % of the stall torque k E/R at the step voltage E, 2–48 V), a record (rate 1 Hz–100 kHz,
 //! duration 0.01–1000 s, either drawn independently or placed around the motor's own time
 //! constants; at most `MAX_SAMPLES` samples, redrawn otherwise), a logger (10 or 12 bits, 1 LSB
-//! of noise, speed from an encoder or a tachometer), a step of either sign, one record
+//! of noise, an encoder of 500, 2000 or 8192 counts, speed from it or from a tachometer), a step of either sign, one record
 //! (`identify --record`, output error) or a pair (`--high`, `--low` at E/8, each of either
 //! sign), and in a third of the cases `t` or `current` rewritten in ms or mA, with the unit in
 //! the header (`t[ms]`, `current[mA]`) in half of those and without it in the other half.
@@ -185,18 +185,11 @@ impl Case {
             let mut logger: Vec<String> = ["--adc-bits", bits, "--noise-lsb", "1"]
                 .map(String::from)
                 .to_vec();
-            match rng.pick(&["encoder", "encoder", "tacho+encoder", "tacho"]) {
-                "tacho" => logger.extend(["--speed-from", "tacho"].map(String::from)),
-                source => {
-                    let cpr = rng.pick(&["500", "2000", "8192"]);
-                    let from = if source == "encoder" {
-                        "encoder"
-                    } else {
-                        "tacho"
-                    };
-                    logger.extend(["--encoder-cpr", cpr, "--speed-from", from].map(String::from));
-                }
-            }
+            // Always an encoder: without one `simulate` writes the exact angle, which no
+            // logger measures (and which `identify` would use before the tachometer).
+            let cpr = rng.pick(&["500", "2000", "8192"]);
+            let from = rng.pick(&["encoder", "encoder", "tacho"]);
+            logger.extend(["--encoder-cpr", cpr, "--speed-from", from].map(String::from));
             let scaling = if rng.chance(1.0 / 3.0) {
                 let (column, unit) = if rng.chance(0.5) {
                     (0, "t[ms]")
@@ -311,7 +304,11 @@ fn run_case(case: &Case, dir: &Path) -> Outcome {
     let started = std::time::Instant::now();
     let motor_path = dir.join("motor.json");
     std::fs::write(&motor_path, case.motor_json()).unwrap();
-    let mut commands = format!("cat > {} <<'EOF'\n{}\nEOF\n", motor_path.display(), case.motor_json());
+    let mut commands = format!(
+        "cat > {} <<'EOF'\n{}\nEOF\n",
+        motor_path.display(),
+        case.motor_json()
+    );
     let mut violations = Vec::new();
     let mut records = Vec::new();
     for (n, volts) in case.voltages.iter().enumerate() {
