@@ -26,11 +26,13 @@
 //! - One case again: `MOTORID_CASE=I` runs case I alone (with `MOTORID_HEAVY=1` for the heavy
 //!   sample cap); a failing case prints its shell commands, and its files are kept.
 //!
-//! Ignored while `identify` fails it (seeded CI run): case 16, a `t` in ms without a unit
-//! (0.072 ms steps, below the 0.5 s the reader suspects) accepted with L 1000 times the
-//! truth; case 1, `identify --record` of a 134-sample record (4.3 Hz) still running after
-//! 60 s; L's intervals containing the truth in 4 of 10 accepted cases, mostly where the step
-//! falls between two samples (the fit puts it at the next sample).
+//! Ignored while `identify` fails it. The seeded CI run (121 s here, 60 s of it case 1):
+//! cases 7 and 11, a `current` in mA without a unit (peak power under the reader's 100 kW)
+//! accepted with R 1000 times too small; case 16, a `t` in ms without a unit (0.072 ms steps,
+//! under the reader's 0.5 s) accepted with L 1000 times the truth; case 1, `identify --record`
+//! of 134 samples at 4.3 Hz (τe = 2.2 ms) still running after 60 s; L's intervals contain the
+//! truth in 4 of 12 accepted cases: where the step falls between two samples the fit puts it
+//! at the next sample, and every such L interval misses (26 of 26 in the heavy run).
 //!
 //! Cases are seeded by their index alone, so case I is the same whatever the count.
 
