@@ -493,7 +493,7 @@ fn check_unit_plausibility(
         return Err((
             line,
             format!(
-                "the time steps by {dt} between samples: as seconds, far too slow to show a motor's transients. \
+                "the time steps by {dt} between samples: as seconds, below 100 Hz, slower than motor records are taken. \
                  If the time is in ms, write `t[ms]` in the header; write `t[s]` to confirm seconds"
             ),
         ));
