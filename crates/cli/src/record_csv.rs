@@ -501,7 +501,12 @@ fn check_unit_plausibility(
     let peak = |y: &[f64]| y.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let power = peak(&record.voltage) * peak(&record.current);
     let apparent_ohm = peak(&record.voltage) / peak(&record.current);
-    if !stated("current") && (power > MAX_PLAIN_POWER_W || apparent_ohm < MIN_PLAIN_OHM) {
+    // Without a voltage column (a current-driven axis) there is nothing to compare with.
+    let with_voltage = peak(&record.voltage) > 0.0;
+    if !stated("current")
+        && with_voltage
+        && (power > MAX_PLAIN_POWER_W || apparent_ohm < MIN_PLAIN_OHM)
+    {
         return Err((
             line,
             format!(

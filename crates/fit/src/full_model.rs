@@ -491,7 +491,7 @@ pub(crate) fn fit_weighted<P: WeightedProblem>(
         })
     });
     let quality = problem.channel_quality(values);
-    let refusal = assess(&params, ci95.is_some(), &quality, &problem.facts());
+    let refusal = assess(&params, ci95.as_ref(), &quality, &problem.facts());
     Ok(FullFit {
         params,
         std_error,

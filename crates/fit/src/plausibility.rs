@@ -40,6 +40,14 @@ pub enum Refusal {
     /// The parameter covariance could not be computed (a singular Jacobian: some parameter
     /// does not change the model's output), so there are no intervals.
     NoIntervals,
+    /// A parameter's 95 % interval is wider than the value itself (it reaches zero): the
+    /// records do not determine it, and a linearised interval that wide is no longer honest.
+    Undetermined {
+        /// The parameter (`R`, `L`, `k`, `f`, `J`, `Ts`).
+        parameter: &'static str,
+        /// Half-width of its interval over its value.
+        relative_half_width: f64,
+    },
 }
 
 impl fmt::Display for Refusal {
@@ -59,6 +67,15 @@ impl fmt::Display for Refusal {
             Refusal::Implausible { reason } => write!(f, "physically impossible for these records: {reason}"),
             Refusal::NoIntervals => f.write_str(
                 "the 95 % intervals cannot be computed (singular Jacobian: some parameter does not act on the records)",
+            ),
+            Refusal::Undetermined {
+                parameter,
+                relative_half_width,
+            } => write!(
+                f,
+                "{parameter} is not determined by these records: its 95 % interval spans ±{:.0} % of the value \
+                 (record longer, or with more excitation)",
+                100.0 * relative_half_width
             ),
         }
     }
@@ -80,7 +97,7 @@ pub(crate) struct RecordFacts {
 /// The reason to refuse a converged fit of `params`, if any.
 pub(crate) fn assess(
     params: &MotorParams,
-    has_intervals: bool,
+    ci95: Option<&[[f64; 2]; 6]>,
     quality: &[ChannelQuality],
     facts: &RecordFacts,
 ) -> Option<Refusal> {
@@ -127,7 +144,17 @@ pub(crate) fn assess(
             });
         }
     }
-    (!has_intervals).then_some(Refusal::NoIntervals)
+    let Some(ci) = ci95 else {
+        return Some(Refusal::NoIntervals);
+    };
+    let values = p.values();
+    (0..6)
+        .map(|i| (i, 0.5 * (ci[i][1] - ci[i][0]) / values[i]))
+        .find(|&(_, rel)| !(rel <= 1.0))
+        .map(|(i, rel)| Refusal::Undetermined {
+            parameter: crate::full_model::PARAM_NAMES[i],
+            relative_half_width: rel,
+        })
 }
 
 impl Default for RecordFacts {
@@ -188,6 +215,11 @@ mod tests {
         }
     }
 
+    /// Intervals of ± `rel` of each value.
+    fn ci(p: &MotorParams, rel: f64) -> [[f64; 2]; 6] {
+        p.values().map(|v| [v * (1.0 - rel), v * (1.0 + rel)])
+    }
+
     fn quality(fit_percent: f64) -> ChannelQuality {
         ChannelQuality {
             test: 0,
@@ -200,14 +232,22 @@ mod tests {
 
     #[test]
     fn the_paper_motor_on_its_records_is_accepted() {
-        assert_eq!(assess(&paper(), true, &[quality(98.4)], &facts()), None);
+        assert_eq!(
+            assess(
+                &paper(),
+                Some(&ci(&paper(), 0.01)),
+                &[quality(98.4)],
+                &facts()
+            ),
+            None
+        );
     }
 
     #[test]
     fn each_impossibility_is_named() {
         // A model worse than the channel's mean (the 40 V step fitted to Ts = 2443 N·m).
         assert!(matches!(
-            assess(&paper(), true, &[quality(-208.9)], &facts()),
+            assess(&paper(), Some(&ci(&paper(), 0.01)), &[quality(-208.9)], &facts()),
             Some(Refusal::WorseThanConstant { nrmse, .. }) if (nrmse - 3.089).abs() < 1e-9
         ));
         // A Coulomb torque the motor's largest torque never overcomes, though it turned.
@@ -216,7 +256,7 @@ mod tests {
             ..paper()
         };
         assert!(matches!(
-            assess(&stuck, true, &[], &facts()),
+            assess(&stuck, Some(&ci(&stuck, 0.01)), &[], &facts()),
             Some(Refusal::Implausible { reason }) if reason.contains("Ts")
         ));
         // The same torque is possible when nothing shows the motor turning.
@@ -224,14 +264,14 @@ mod tests {
             moved: false,
             ..facts()
         };
-        assert_eq!(assess(&stuck, true, &[], &still), None);
+        assert_eq!(assess(&stuck, Some(&ci(&stuck, 0.01)), &[], &still), None);
         // L = 7e-91 H (100 kHz records fitted from a wrong start): τe far below a sample.
         let no_l = MotorParams {
             l_henry: 7e-91,
             ..paper()
         };
         assert!(matches!(
-            assess(&no_l, true, &[], &facts()),
+            assess(&no_l, Some(&ci(&no_l, 0.01)), &[], &facts()),
             Some(Refusal::Implausible { reason }) if reason.contains("tau_e")
         ));
         // A mechanical time constant a thousand record spans long.
@@ -240,13 +280,20 @@ mod tests {
             ..paper()
         };
         assert!(matches!(
-            assess(&heavy, true, &[], &facts()),
+            assess(&heavy, Some(&ci(&heavy, 0.01)), &[], &facts()),
             Some(Refusal::Implausible { reason }) if reason.contains("J is not determined")
         ));
         assert_eq!(
-            assess(&paper(), false, &[], &facts()),
+            assess(&paper(), None, &[], &facts()),
             Some(Refusal::NoIntervals)
         );
+        // k = 6e-12 N·m/A ± 3.5e7 % (9-sample records at 24 Hz): not determined.
+        let mut wide = ci(&paper(), 0.01);
+        wide[2] = [-0.5, 0.8];
+        assert!(matches!(
+            assess(&paper(), Some(&wide), &[], &facts()),
+            Some(Refusal::Undetermined { parameter: "k", .. })
+        ));
     }
 
     #[test]
