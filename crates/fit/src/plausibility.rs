@@ -150,7 +150,7 @@ pub(crate) fn assess(
     let values = p.values();
     (0..6)
         .map(|i| (i, 0.5 * (ci[i][1] - ci[i][0]) / values[i]))
-        .find(|&(_, rel)| !(rel <= 1.0))
+        .find(|&(_, rel)| rel.is_nan() || rel > 1.0)
         .map(|(i, rel)| Refusal::Undetermined {
             parameter: crate::full_model::PARAM_NAMES[i],
             relative_half_width: rel,
