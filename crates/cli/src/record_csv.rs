@@ -133,6 +133,8 @@ pub struct Loaded {
     pub lines: Vec<usize>,
     /// Samples of voltage, current and speed at an ADC rail.
     pub clipped: [Vec<bool>; 3],
+    /// One ADC step of the voltage channel \[V\], from the `# measurement:` metadata, if given.
+    pub voltage_lsb: Option<f64>,
 }
 
 impl Loaded {
@@ -462,6 +464,14 @@ fn metadata_rails(table: &Table) -> [Option<([f64; 2], f64)>; 3] {
     out
 }
 
+/// One ADC step of the voltage channel \[V\] stated by the `# measurement:` metadata.
+fn voltage_lsb(table: &Table) -> Option<f64> {
+    let m = table
+        .meta("measurement")
+        .and_then(|text| serde_json::from_str::<motor_model::MeasurementModel>(text).ok())?;
+    Some(m.adc?.lsb(m.ranges[0]?))
+}
+
 /// Maps a table's columns to a record (SPEC section 4): names or aliases, units converted, `t`
 /// strictly increasing, `current` required, `voltage` required when `need_voltage`; finds the
 /// samples at an ADC rail.
@@ -569,6 +579,7 @@ fn to_record(
         record,
         lines: table.lines.clone(),
         clipped: masks,
+        voltage_lsb: voltage_lsb(table),
     })
 }
 

@@ -28,6 +28,7 @@ mod checks;
 mod clipping;
 mod error;
 mod full_model;
+mod input_uncertainty;
 mod lm;
 mod mechanical;
 mod model33;
@@ -45,7 +46,11 @@ pub use checks::{
 pub use clipping::{find_clipping, MIN_CLIPPED_RUN};
 pub use error::FitError;
 pub use full_model::{
-    identify_full, noise_std, Channel, ChannelQuality, FullFit, StepTest, PARAM_NAMES, PARAM_UNITS,
+    identify_full, identify_full_with_inputs, noise_std, Channel, ChannelQuality, FullFit, StepTest, PARAM_NAMES, PARAM_UNITS,
+};
+pub use input_uncertainty::{
+    estimate_level, quantisation_bias_variance, LevelEstimate, LevelPrior, StepInputs,
+    VoltageScale,
 };
 pub use lm::{
     solve, LeastSquares, LevenbergMarquardt, LmReport, LmSettings, NormalEquations, Termination,
@@ -68,4 +73,4 @@ pub use stats::{
     newey_west_lags, sandwich_uncertainty, student_t_quantile, uncertainty, NeweyWest, Uncertainty,
 };
 pub use steady_fit::{fit_apparent_resistance, SteadyFit};
-pub use step_location::{locate_step, StepLocation};
+pub use step_location::{locate_step, locate_step_with, StepLocation};

@@ -4,8 +4,9 @@ use std::path::Path;
 
 use anyhow::Result;
 use fit::{
-    electrical_equation, equation_error_start, fit_apparent_resistance, identify_full,
-    identify_inverse_model, identify_output_error, identify_paper, locate_step, steady_state_start,
+    electrical_equation, equation_error_start, fit_apparent_resistance, identify_full_with_inputs,
+    identify_inverse_model, identify_output_error, identify_paper, locate_step_with,
+    steady_state_start, StepInputs,
     voltage_input, ExcitedRecord, FullFit, InverseModelSettings, LmSettings, PaperIdentification,
     StepTest, MECHANICAL_NAMES, PARAM_NAMES, PARAM_UNITS,
 };
@@ -32,6 +33,8 @@ pub struct LoadedStep {
     position: Option<Vec<f64>>,
     exclude_current: Option<Vec<bool>>,
     exclude_speed: Option<Vec<bool>>,
+    /// What the record leaves unknown about the step (height and instant).
+    pub inputs: StepInputs,
 }
 
 impl LoadedStep {
@@ -105,7 +108,7 @@ pub fn load_step(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedStep
     let loaded = read_loaded(path, map, true)?;
     let (exclude_current, exclude_speed) = check_clipping(&shown, &loaded, quiet)?;
     let label = file_lines(&shown, &loaded.lines);
-    let mut step = step_from_record(label, loaded.record)?;
+    let mut step = step_from_record_with(label, loaded.record, loaded.voltage_lsb)?;
     step.path = shown;
     let from = loaded.lines.len() - step.current.len();
     step.exclude_current = exclude_current.map(|m| m[from..].to_vec());
@@ -120,7 +123,18 @@ pub fn load_step(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedStep
 /// (for the paper method's Ωrm) comes from the `speed` column, or from the `position` column by
 /// central differences; the full fit uses the encoder angle where there is one.
 pub fn step_from_record(shown: String, cols: Record) -> Result<LoadedStep> {
-    let loc = locate_step(&cols.t, &cols.voltage).map_err(|e| BadInput(format!("{shown}: {e}")))?;
+    step_from_record_with(shown, cols, None)
+}
+
+/// [`step_from_record`] with the voltage's ADC step `voltage_lsb` \[V\] if known (a noise-free
+/// quantised step height is known only to ±½ step).
+pub fn step_from_record_with(
+    shown: String,
+    cols: Record,
+    voltage_lsb: Option<f64>,
+) -> Result<LoadedStep> {
+    let loc = locate_step_with(&cols.t, &cols.voltage, voltage_lsb)
+        .map_err(|e| BadInput(format!("{shown}: {e}")))?;
     let from = loc.index;
     let speed = match (&cols.speed, &cols.position) {
         (Some(s), _) => Some(s[from..].to_vec()),
@@ -137,6 +151,7 @@ pub fn step_from_record(shown: String, cols: Record) -> Result<LoadedStep> {
         position: cols.position.as_ref().map(|p| p[from..].to_vec()),
         exclude_current: None,
         exclude_speed: None,
+        inputs: loc.inputs(),
     })
 }
 
@@ -835,7 +850,7 @@ pub fn identify_pair(
                     .map_err(|e| BadInput(format!("{both}: {e}")))?,
             };
             Some(
-                identify_full(&tests, &start, settings)
+                identify_full_with_inputs(&tests, &[hv.inputs, lv.inputs], &start, settings)
                     .map_err(|e| BadInput(format!("{both}: {e}")))?,
             )
         }

@@ -2,12 +2,12 @@
 //! intervals honest? Many noisy record pairs of one motor, identified by both methods.
 
 use anyhow::Result;
-use fit::{identify_full, identify_paper, steady_state_start, LmSettings, PARAM_NAMES};
-use motor_model::{MeasurementModel, MotorParams, Record, StepResponse};
+use fit::{identify_full_with_inputs, identify_paper, steady_state_start, LmSettings, PARAM_NAMES};
+use motor_model::{MeasurementModel, MotorParams, NoiseRng, Record, StepResponse};
 use serde_json::json;
 
 use crate::args::{MeasurementArgs, MontecarloArgs, SpeedFromArg};
-use crate::commands::identify::{step_from_record, LoadedStep};
+use crate::commands::identify::{step_from_record_with, LoadedStep};
 use crate::settings;
 use crate::BadInput;
 
@@ -58,6 +58,19 @@ pub fn measured_step(
     at_s: f64,
     seed: u64,
 ) -> Result<(Record, MeasurementModel)> {
+    measured_step_with(logger, None, motor, volts, at_s, seed)
+}
+
+/// [`measured_step`] with `voltage_noise_lsb` \[LSB\] of noise on the voltage channel instead
+/// of the logger's `noise_lsb`, if given.
+pub fn measured_step_with(
+    logger: &Logger,
+    voltage_noise_lsb: Option<f64>,
+    motor: &MotorParams,
+    volts: f64,
+    at_s: f64,
+    seed: u64,
+) -> Result<(Record, MeasurementModel)> {
     let trace = StepResponse::new(motor, volts)
         .trace(at_s, logger.duration_s, logger.rate_hz)
         .map_err(|e| BadInput(e.to_string()))?;
@@ -71,22 +84,55 @@ pub fn measured_step(
         speed_from: SpeedFromArg::Encoder,
         seed,
     };
-    let model = settings::measurement(&m, &trace)?;
+    let mut model = settings::measurement(&m, &trace)?;
+    if let (Some(adc), Some(range), Some(lsb)) = (model.adc, model.ranges[0], voltage_noise_lsb) {
+        model.noise_std[0] = lsb * adc.lsb(range);
+    }
     let rec = model.apply(&trace).map_err(|e| BadInput(e.to_string()))?;
     Ok((rec, model))
 }
 
 /// A step of `volts` on `motor` recorded by `logger` with noise seed `seed`, located.
 pub fn record(logger: &Logger, motor: &MotorParams, volts: f64, seed: u64) -> Result<LoadedStep> {
-    let (rec, _) = measured_step(logger, motor, volts, 0.0, seed)?;
-    step_from_record(format!("simulated {volts} V record (seed {seed})"), rec)
+    record_at(logger, None, motor, volts, 0.0, seed)
 }
 
-fn one_run(a: &MontecarloArgs, motor: &MotorParams, i: usize) -> Result<Run> {
+/// A step of `volts` at `at_s` \[s\] on `motor` recorded by `logger` (with
+/// `voltage_noise_lsb` on the voltage if given) with noise seed `seed`, located.
+fn record_at(
+    logger: &Logger,
+    voltage_noise_lsb: Option<f64>,
+    motor: &MotorParams,
+    volts: f64,
+    at_s: f64,
+    seed: u64,
+) -> Result<LoadedStep> {
+    let (rec, model) = measured_step_with(logger, voltage_noise_lsb, motor, volts, at_s, seed)?;
+    let lsb = model.adc.zip(model.ranges[0]).map(|(adc, r)| adc.lsb(r));
+    step_from_record_with(format!("simulated {volts} V record (seed {seed})"), rec, lsb)
+}
+
+fn one_run(a: &MontecarloArgs, nominal: &MotorParams, i: usize) -> Result<Run> {
     let seed = a.seed.wrapping_add(2 * i as u64);
     let logger = Logger::from(a);
-    let hv = record(&logger, motor, a.high_voltage, seed)?;
-    let lv = record(&logger, motor, a.low_voltage, seed.wrapping_add(1))?;
+    // Run i's own motor and step instants (a generator apart from the noise's).
+    let mut rng = NoiseRng::new(seed ^ 0x5eed_5eed_5eed_5eed);
+    let spread = nominal
+        .values()
+        .map(|v| v * (1.0 + a.motor_spread * rng.normal()));
+    let motor = &MotorParams::from_values(spread)
+        .map_err(|e| BadInput(format!("run {i}: --motor-spread {}: {e}", a.motor_spread)))?;
+    let mut at = || {
+        if a.subsample_step {
+            rng.uniform() / a.rate
+        } else {
+            0.0
+        }
+    };
+    let (at_high, at_low) = (at(), at());
+    let vn = a.voltage_noise_lsb;
+    let hv = record_at(&logger, vn, motor, a.high_voltage, at_high, seed)?;
+    let lv = record_at(&logger, vn, motor, a.low_voltage, at_low, seed.wrapping_add(1))?;
     let tests = [hv.test(), lv.test()];
     let truth = motor.values();
     let rel = |p: &MotorParams| {
@@ -99,7 +145,7 @@ fn one_run(a: &MontecarloArgs, motor: &MotorParams, i: usize) -> Result<Run> {
         None => steady_state_start(&tests[0], &tests[1])
             .map_err(|e| BadInput(format!("run {i}: start: {e}")))?,
     };
-    let full = identify_full(&tests, &start, LmSettings::default())
+    let full = identify_full_with_inputs(&tests, &[hv.inputs, lv.inputs], &start, LmSettings::default())
         .map_err(|e| BadInput(format!("run {i}: full method: {e}")))?;
     Ok(Run {
         paper_error: paper.map(|p| rel(&p.params)),
