@@ -181,6 +181,10 @@ pub struct MontecarloArgs {
     /// differ even without noise), e.g. 0.02.
     #[arg(long, default_value_t = 0.0)]
     pub motor_spread: f64,
+    /// Stretch every conditioning range by a random 0-5 % per record, so that a level's place
+    /// between two ADC codes differs from run to run.
+    #[arg(long)]
+    pub vary_range: bool,
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,

@@ -12,7 +12,9 @@ use motor_model::{Dual, MotorParams, MotorState, Real, StepResponse};
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::FitError;
-use crate::input_uncertainty::{fit_with_inputs, Nuisance, NuisanceProblem, StepInputs};
+use crate::input_uncertainty::{
+    fit_with_inputs, settled_current, Nuisance, NuisanceProblem, StepInputs,
+};
 use crate::lm::{solve, LeastSquares, LmSettings, NormalEquations, Termination};
 use crate::stats::{sandwich_uncertainty, NeweyWest};
 
@@ -188,6 +190,11 @@ struct Weighted {
     dt: f64,
     n: usize,
     channels: Vec<ChannelData>,
+    /// Offset \[A\] added to the model current from sample `settled_from` on: the settled
+    /// current's quantisation error, an uncertain input (0 as estimated).
+    current_offset: f64,
+    /// First sample of the settled current, with the variance of its offset \[A²\], if any.
+    settled: Option<(usize, f64)>,
 }
 
 struct FullProblem {
@@ -244,7 +251,12 @@ impl FullProblem {
             response.for_each_sample(w.t_first, w.dt, n, |i, s: MotorState<T>| {
                 for (c, ch) in w.channels.iter().enumerate() {
                     let model = match ch.kind {
-                        Channel::Current => s.current_a,
+                        Channel::Current => match w.settled {
+                            Some((from, _)) if i >= from => {
+                                s.current_a + T::cst(w.current_offset)
+                            }
+                            _ => s.current_a,
+                        },
                         Channel::Speed => s.speed_rad_s,
                         Channel::EncoderSpeed => continue,
                     };
@@ -340,7 +352,8 @@ const VOLTS_DIFF_STEP: f64 = 1e-5;
 const DELAY_DIFF_STEP: f64 = 1e-3;
 
 impl FullProblem {
-    /// The test and input (0: step height, 1: `t_first`) of nuisance `j`.
+    /// The test and input (0: step height, 1: `t_first`, 2: settled-current offset) of
+    /// nuisance `j`.
     fn nuisance_slots(&self) -> Vec<(usize, usize)> {
         let mut out = Vec::new();
         for (k, (_, _, u)) in self.inputs.iter().enumerate() {
@@ -349,6 +362,9 @@ impl FullProblem {
             }
             if u.delay_variance_s2 > 0.0 {
                 out.push((k, 1));
+            }
+            if self.tests[k].settled.is_some() {
+                out.push((k, 2));
             }
         }
         out
@@ -369,6 +385,14 @@ impl NuisanceProblem for FullProblem {
                         prior_variance: u.volts_variance_v2,
                         step: VOLTS_DIFF_STEP * volts.abs().max(1e-3),
                     }
+                } else if slot == 2 {
+                    let variance = w.settled.map_or(0.0, |(_, v)| v);
+                    Nuisance {
+                        value: w.current_offset,
+                        prior_mean: 0.0,
+                        prior_variance: variance,
+                        step: 1e-3 * variance.sqrt(),
+                    }
                 } else {
                     Nuisance {
                         value: w.t_first,
@@ -384,10 +408,10 @@ impl NuisanceProblem for FullProblem {
     fn set_nuisance(&mut self, j: usize, value: f64) {
         if let Some(&(k, slot)) = self.nuisance_slots().get(j) {
             let w = &mut self.tests[k];
-            if slot == 0 {
-                w.volts = value;
-            } else {
-                w.t_first = value;
+            match slot {
+                0 => w.volts = value,
+                1 => w.t_first = value,
+                _ => w.current_offset = value,
             }
         }
     }
@@ -507,6 +531,8 @@ pub fn identify_full_with_inputs(
             dt: t.dt,
             n,
             channels,
+            current_offset: 0.0,
+            settled: settled_current(t.current, input.current_lsb_a),
         });
     }
     let inputs = weighted

@@ -285,6 +285,12 @@ pub struct StepInputs {
     pub delay_s: f64,
     /// Variance of that time \[s²\]: `dt²/12` for a uniform place in the period.
     pub delay_variance_s2: f64,
+    /// One ADC step of the current channel \[A\], or 0 if unknown or unquantised. A current
+    /// that settles within one step reads one code (or a few, with little noise) for the rest
+    /// of the record: its quantisation error is then a constant offset the parameters absorb
+    /// and the residuals cannot show, so it enters as an input of variance
+    /// [`quantisation_bias_variance`].
+    pub current_lsb_a: f64,
 }
 
 impl StepInputs {
@@ -295,8 +301,32 @@ impl StepInputs {
             volts_variance_v2: level.variance_v2,
             delay_s: 0.5 * dt_s,
             delay_variance_s2: dt_s * dt_s / 12.0,
+            current_lsb_a: 0.0,
         }
     }
+}
+
+/// The samples at the end of `current` that stay within one ADC step `lsb` of the final level
+/// (the mean of the last 5 %), as the index of the first, with the variance of their common
+/// quantisation offset; `None` when that variance is negligible (noise of a step or more
+/// dithers the quantiser) or nothing settles.
+pub(crate) fn settled_current(current: &[f64], lsb: f64) -> Option<(usize, f64)> {
+    if !(lsb > 0.0 && lsb.is_finite()) || current.len() < 20 {
+        return None;
+    }
+    let tail = &current[current.len() - current.len() / 20..];
+    let end = tail.iter().sum::<f64>() / tail.len() as f64;
+    let from = current
+        .iter()
+        .rposition(|y| (y - end).abs() > lsb)
+        .map_or(0, |i| i + 1);
+    let settled = current.get(from..).filter(|s| s.len() >= 2)?;
+    let n = settled.len() as f64;
+    let mean = settled.iter().sum::<f64>() / n;
+    let s2 = settled.iter().map(|y| (y - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    let sigma = (s2 - lsb * lsb / 12.0).max(0.0).sqrt();
+    let variance = quantisation_bias_variance(sigma, lsb);
+    (variance > 1e-6 * lsb * lsb).then_some((from, variance))
 }
 
 /// What a record leaves unknown about one level of its piecewise-constant voltage
@@ -459,7 +489,8 @@ pub(crate) fn fit_with_inputs<P: NuisanceProblem>(
         let values = fit.params.values();
         let sd: Vec<f64> = (0..6).map(|i| se[i] / values[i]).collect();
         let conditional = DMatrix::from_fn(6, 6, |i, j| corr[(i, j)] * sd[i] * sd[j]);
-        let cov = conditional + &joint.g * &joint.s * joint.g.transpose();
+        let added = &joint.g * &joint.s * joint.g.transpose();
+        let cov = conditional + added;
         let n = joint.n.saturating_sub(6);
         let t = student_t_quantile(0.975, n.max(1) as f64);
         let sd_new: Vec<f64> = (0..6).map(|i| cov[(i, i)].max(0.0).sqrt()).collect();

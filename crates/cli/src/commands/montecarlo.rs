@@ -11,6 +11,10 @@ use crate::commands::identify::{step_from_record_with, LoadedStep};
 use crate::settings;
 use crate::BadInput;
 
+/// Largest stretch of the conditioning ranges with `--vary-range` (a fraction: more than one
+/// ADC step at full scale, so a level's place between codes is uniform over the runs).
+const RANGE_STRETCH: f64 = 0.05;
+
 /// Outcome of one record pair.
 struct Run {
     /// `None` where the paper's method does not apply (e.g. an underdamped motor).
@@ -58,14 +62,16 @@ pub fn measured_step(
     at_s: f64,
     seed: u64,
 ) -> Result<(Record, MeasurementModel)> {
-    measured_step_with(logger, None, motor, volts, at_s, seed)
+    measured_step_with(logger, None, 1.0, motor, volts, at_s, seed)
 }
 
 /// [`measured_step`] with `voltage_noise_lsb` \[LSB\] of noise on the voltage channel instead
-/// of the logger's `noise_lsb`, if given.
+/// of the logger's `noise_lsb`, if given, and every conditioning range stretched by
+/// `range_scale` \[-\] (≥ 1: the signals sit elsewhere between the ADC's codes).
 pub fn measured_step_with(
     logger: &Logger,
     voltage_noise_lsb: Option<f64>,
+    range_scale: f64,
     motor: &MotorParams,
     volts: f64,
     at_s: f64,
@@ -85,8 +91,19 @@ pub fn measured_step_with(
         seed,
     };
     let mut model = settings::measurement(&m, &trace)?;
-    if let (Some(adc), Some(range), Some(lsb)) = (model.adc, model.ranges[0], voltage_noise_lsb) {
-        model.noise_std[0] = lsb * adc.lsb(range);
+    if let Some(adc) = model.adc {
+        for c in 0..3 {
+            if let Some(r) = model.ranges[c] {
+                let stretched = motor_model::Range::new(r.lo * range_scale, r.hi * range_scale)
+                    .map_err(|e| BadInput(e.to_string()))?;
+                let lsb = match (c, voltage_noise_lsb) {
+                    (0, Some(v)) => v,
+                    _ => logger.noise_lsb,
+                };
+                model.ranges[c] = Some(stretched);
+                model.noise_std[c] = lsb * adc.lsb(stretched);
+            }
+        }
     }
     let rec = model.apply(&trace).map_err(|e| BadInput(e.to_string()))?;
     Ok((rec, model))
@@ -94,22 +111,27 @@ pub fn measured_step_with(
 
 /// A step of `volts` on `motor` recorded by `logger` with noise seed `seed`, located.
 pub fn record(logger: &Logger, motor: &MotorParams, volts: f64, seed: u64) -> Result<LoadedStep> {
-    record_at(logger, None, motor, volts, 0.0, seed)
+    record_at(logger, (None, 1.0), motor, volts, 0.0, seed)
 }
 
 /// A step of `volts` at `at_s` \[s\] on `motor` recorded by `logger` (with
-/// `voltage_noise_lsb` on the voltage if given) with noise seed `seed`, located.
+/// `voltage_noise_lsb` on the voltage if given, ranges stretched by `range_scale`) with noise
+/// seed `seed`, located.
 fn record_at(
     logger: &Logger,
-    voltage_noise_lsb: Option<f64>,
+    (voltage_noise_lsb, range_scale): (Option<f64>, f64),
     motor: &MotorParams,
     volts: f64,
     at_s: f64,
     seed: u64,
 ) -> Result<LoadedStep> {
-    let (rec, model) = measured_step_with(logger, voltage_noise_lsb, motor, volts, at_s, seed)?;
-    let lsb = model.adc.zip(model.ranges[0]).map(|(adc, r)| adc.lsb(r));
-    step_from_record_with(format!("simulated {volts} V record (seed {seed})"), rec, lsb)
+    let (rec, model) =
+        measured_step_with(logger, voltage_noise_lsb, range_scale, motor, volts, at_s, seed)?;
+    let lsb = |c: usize| model.adc.zip(model.ranges[c]).map(|(adc, r)| adc.lsb(r));
+    let mut step =
+        step_from_record_with(format!("simulated {volts} V record (seed {seed})"), rec, lsb(0))?;
+    step.inputs.current_lsb_a = lsb(1).unwrap_or(0.0);
+    Ok(step)
 }
 
 fn one_run(a: &MontecarloArgs, nominal: &MotorParams, i: usize) -> Result<Run> {
@@ -130,9 +152,17 @@ fn one_run(a: &MontecarloArgs, nominal: &MotorParams, i: usize) -> Result<Run> {
         }
     };
     let (at_high, at_low) = (at(), at());
-    let vn = a.voltage_noise_lsb;
-    let hv = record_at(&logger, vn, motor, a.high_voltage, at_high, seed)?;
-    let lv = record_at(&logger, vn, motor, a.low_voltage, at_low, seed.wrapping_add(1))?;
+    let mut chain = || {
+        let stretch = if a.vary_range {
+            1.0 + RANGE_STRETCH * rng.uniform()
+        } else {
+            1.0
+        };
+        (a.voltage_noise_lsb, stretch)
+    };
+    let (chain_high, chain_low) = (chain(), chain());
+    let hv = record_at(&logger, chain_high, motor, a.high_voltage, at_high, seed)?;
+    let lv = record_at(&logger, chain_low, motor, a.low_voltage, at_low, seed.wrapping_add(1))?;
     let tests = [hv.test(), lv.test()];
     let truth = motor.values();
     let rel = |p: &MotorParams| {
