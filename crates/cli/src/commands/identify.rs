@@ -5,9 +5,10 @@ use std::path::Path;
 use anyhow::Result;
 use fit::{
     electrical_equation, equation_error_start, fit_apparent_resistance, identify_full_with_inputs,
-    identify_inverse_model, identify_output_error, identify_paper, locate_step_with,
+    identify_inverse_model, identify_output_error_with_inputs, identify_paper, locate_step_with,
     steady_state_start, StepInputs,
-    voltage_input, ExcitedRecord, FullFit, InverseModelSettings, LmSettings, PaperIdentification,
+    voltage_input, voltage_levels, ExcitedRecord, FullFit, InverseModelSettings, LevelPrior,
+    LmSettings, PaperIdentification,
     StepTest, MECHANICAL_NAMES, PARAM_NAMES, PARAM_UNITS,
 };
 use motor_model::{central_difference, Derived, Input, MotorParams, Record};
@@ -666,6 +667,8 @@ pub struct LoadedExcited {
     pub record: Record,
     /// The voltage waveform rebuilt from the voltage column, time from the first sample.
     pub input: Input,
+    /// What the record leaves unknown about each level of `input` (empty for a replayed one).
+    pub priors: Vec<LevelPrior>,
     dt: f64,
     exclude_current: Option<Vec<bool>>,
     exclude_speed: Option<Vec<bool>>,
@@ -700,8 +703,8 @@ pub fn load_excited(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedE
         ))
         .into());
     }
-    let input =
-        voltage_input(&rec.t, &rec.voltage).map_err(|e| BadInput(format!("{label}: {e}")))?;
+    let (input, priors) = voltage_levels(&rec.t, &rec.voltage, loaded.voltage_lsb)
+        .map_err(|e| BadInput(format!("{label}: {e}")))?;
     if input.peak_volts() == 0.0 {
         return Err(BadInput(format!(
             "{label}: the voltage is 0 V throughout: nothing drives the motor"
@@ -713,6 +716,7 @@ pub fn load_excited(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedE
         path: shown,
         label,
         input,
+        priors,
         dt,
         exclude_current,
         exclude_speed: if rec.position.is_some() {
@@ -748,7 +752,8 @@ pub fn fit_excited(
         None => equation_error_start(&records)
             .map_err(|e| BadInput(format!("{label}: {e}{start_hint}")))?,
     };
-    let full = identify_output_error(&records, &start, LmSettings::default())
+    let priors: Vec<Vec<LevelPrior>> = loaded.iter().map(|l| l.priors.clone()).collect();
+    let full = identify_output_error_with_inputs(&records, &priors, &start, LmSettings::default())
         .map_err(|e| BadInput(format!("{label}: {e}")))?;
     Ok((start, full))
 }
