@@ -252,9 +252,7 @@ impl FullProblem {
                 for (c, ch) in w.channels.iter().enumerate() {
                     let model = match ch.kind {
                         Channel::Current => match w.settled {
-                            Some((from, _)) if i >= from => {
-                                s.current_a + T::cst(w.current_offset)
-                            }
+                            Some((from, _)) if i >= from => s.current_a + T::cst(w.current_offset),
                             _ => s.current_a,
                         },
                         Channel::Speed => s.speed_rad_s,
@@ -537,7 +535,12 @@ pub fn identify_full_with_inputs(
     }
     let inputs = weighted
         .iter()
-        .zip(inputs.iter().copied().chain(std::iter::repeat(StepInputs::default())))
+        .zip(
+            inputs
+                .iter()
+                .copied()
+                .chain(std::iter::repeat(StepInputs::default())),
+        )
         .map(|(w, u)| (w.volts, w.t_first, u))
         .collect();
     let mut problem = FullProblem {

@@ -270,8 +270,7 @@ fn censored_fit(counts: &[f64], low_rail: bool, high_rail: bool) -> Option<(f64,
     let (_, hm) = hessian_at(x);
     let det = hm[0][0] * hm[1][1] - hm[0][1] * hm[0][1];
     let var_mu = hm[1][1] / det;
-    (x[0].is_finite() && var_mu.is_finite() && var_mu > 0.0 && det > 0.0)
-        .then_some((x[0], var_mu))
+    (x[0].is_finite() && var_mu.is_finite() && var_mu > 0.0 && det > 0.0).then_some((x[0], var_mu))
 }
 
 /// What one step test leaves unknown about its input (see [`crate::identify_full_with_inputs`]).
@@ -426,12 +425,9 @@ fn linearise<P: NuisanceProblem>(problem: &mut P, theta: &[f64]) -> Option<Joint
     });
     grad.rows_mut(6, m).copy_from(&(ju.tr_mul(&r) + offset));
     let step = -(scaled_inverse(&h)? * grad);
-    step.iter().all(|v| v.is_finite()).then_some(Joint {
-        n,
-        g,
-        s,
-        step,
-    })
+    step.iter()
+        .all(|v| v.is_finite())
+        .then_some(Joint { n, g, s, step })
 }
 
 /// Fits `problem` as [`fit_weighted`] does, then moves its uncertain inputs where the records

@@ -46,11 +46,11 @@ pub use checks::{
 pub use clipping::{find_clipping, MIN_CLIPPED_RUN};
 pub use error::FitError;
 pub use full_model::{
-    identify_full, identify_full_with_inputs, noise_std, Channel, ChannelQuality, FullFit, StepTest, PARAM_NAMES, PARAM_UNITS,
+    identify_full, identify_full_with_inputs, noise_std, Channel, ChannelQuality, FullFit,
+    StepTest, PARAM_NAMES, PARAM_UNITS,
 };
 pub use input_uncertainty::{
-    estimate_level, quantisation_bias_variance, LevelEstimate, LevelPrior, StepInputs,
-    VoltageScale,
+    estimate_level, quantisation_bias_variance, LevelEstimate, LevelPrior, StepInputs, VoltageScale,
 };
 pub use lm::{
     solve, LeastSquares, LevenbergMarquardt, LmReport, LmSettings, NormalEquations, Termination,

@@ -21,11 +21,11 @@ use crate::error::FitError;
 use crate::full_model::{
     fit_weighted, noise_std, quality_from_sums, Channel, ChannelQuality, FullFit, WeightedProblem,
 };
-use crate::lm::{LeastSquares, LmSettings, NormalEquations};
 use crate::input_uncertainty::{
     estimate_level, fit_with_inputs, LevelEstimate, LevelPrior, Nuisance, NuisanceProblem,
     VoltageScale,
 };
+use crate::lm::{LeastSquares, LmSettings, NormalEquations};
 use crate::mechanical::{identify_inverse_model, InverseModelSettings};
 use crate::signal::Butterworth;
 use crate::stats::NeweyWest;

@@ -23,7 +23,13 @@ fn full_fit_intervals_cover_the_truth_on_an_independent_simulator() {
     assert_eq!(with_ci, 24);
     let total: usize = inside.iter().sum();
     for (name, n) in fit::PARAM_NAMES.iter().zip(inside) {
-        assert!(n >= 20, "{name}: {n}/24 intervals contain the truth ({inside:?})");
+        assert!(
+            n >= 20,
+            "{name}: {n}/24 intervals contain the truth ({inside:?})"
+        );
     }
-    assert!(total >= 132, "{total}/144 intervals contain the truth ({inside:?})");
+    assert!(
+        total >= 132,
+        "{total}/144 intervals contain the truth ({inside:?})"
+    );
 }

@@ -6,10 +6,9 @@ use anyhow::Result;
 use fit::{
     electrical_equation, equation_error_start, fit_apparent_resistance, identify_full_with_inputs,
     identify_inverse_model, identify_output_error_with_inputs, identify_paper, locate_step_with,
-    steady_state_start, StepInputs,
-    voltage_input, voltage_levels, ExcitedRecord, FullFit, InverseModelSettings, LevelPrior,
-    LmSettings, PaperIdentification,
-    StepTest, MECHANICAL_NAMES, PARAM_NAMES, PARAM_UNITS,
+    steady_state_start, voltage_input, voltage_levels, ExcitedRecord, FullFit,
+    InverseModelSettings, LevelPrior, LmSettings, PaperIdentification, StepInputs, StepTest,
+    MECHANICAL_NAMES, PARAM_NAMES, PARAM_UNITS,
 };
 use motor_model::{central_difference, Derived, Input, MotorParams, Record};
 use serde_json::{json, Value};

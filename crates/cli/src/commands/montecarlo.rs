@@ -125,11 +125,21 @@ fn record_at(
     at_s: f64,
     seed: u64,
 ) -> Result<LoadedStep> {
-    let (rec, model) =
-        measured_step_with(logger, voltage_noise_lsb, range_scale, motor, volts, at_s, seed)?;
+    let (rec, model) = measured_step_with(
+        logger,
+        voltage_noise_lsb,
+        range_scale,
+        motor,
+        volts,
+        at_s,
+        seed,
+    )?;
     let lsb = |c: usize| model.adc.zip(model.ranges[c]).map(|(adc, r)| adc.lsb(r));
-    let mut step =
-        step_from_record_with(format!("simulated {volts} V record (seed {seed})"), rec, lsb(0))?;
+    let mut step = step_from_record_with(
+        format!("simulated {volts} V record (seed {seed})"),
+        rec,
+        lsb(0),
+    )?;
     step.inputs.current_lsb_a = lsb(1).unwrap_or(0.0);
     Ok(step)
 }
@@ -162,7 +172,14 @@ fn one_run(a: &MontecarloArgs, nominal: &MotorParams, i: usize) -> Result<Run> {
     };
     let (chain_high, chain_low) = (chain(), chain());
     let hv = record_at(&logger, chain_high, motor, a.high_voltage, at_high, seed)?;
-    let lv = record_at(&logger, chain_low, motor, a.low_voltage, at_low, seed.wrapping_add(1))?;
+    let lv = record_at(
+        &logger,
+        chain_low,
+        motor,
+        a.low_voltage,
+        at_low,
+        seed.wrapping_add(1),
+    )?;
     let tests = [hv.test(), lv.test()];
     let truth = motor.values();
     let rel = |p: &MotorParams| {
@@ -175,8 +192,13 @@ fn one_run(a: &MontecarloArgs, nominal: &MotorParams, i: usize) -> Result<Run> {
         None => steady_state_start(&tests[0], &tests[1])
             .map_err(|e| BadInput(format!("run {i}: start: {e}")))?,
     };
-    let full = identify_full_with_inputs(&tests, &[hv.inputs, lv.inputs], &start, LmSettings::default())
-        .map_err(|e| BadInput(format!("run {i}: full method: {e}")))?;
+    let full = identify_full_with_inputs(
+        &tests,
+        &[hv.inputs, lv.inputs],
+        &start,
+        LmSettings::default(),
+    )
+    .map_err(|e| BadInput(format!("run {i}: full method: {e}")))?;
     Ok(Run {
         paper_error: paper.map(|p| rel(&p.params)),
         full_error: rel(&full.params),

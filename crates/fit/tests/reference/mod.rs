@@ -51,7 +51,11 @@ fn deriv(m: &Motor, e: f64, x: State, moving: f64) -> State {
     let [r, l, k, f, j, ts] = *m;
     let di = (e - r * x.i - k * x.w) / l;
     if moving == 0.0 {
-        State { i: di, w: 0.0, th: 0.0 }
+        State {
+            i: di,
+            w: 0.0,
+            th: 0.0,
+        }
     } else {
         State {
             i: di,
@@ -80,7 +84,11 @@ fn heun(m: &Motor, e: f64, x: State, h: f64, moving: f64) -> State {
 pub fn simulate(motor: &Motor, input: &Staircase, dt: f64, n: usize) -> Truth {
     let ts = motor[5];
     let k = motor[2];
-    let mut x = State { i: 0.0, w: 0.0, th: 0.0 };
+    let mut x = State {
+        i: 0.0,
+        w: 0.0,
+        th: 0.0,
+    };
     let mut moving = 0.0_f64;
     let mut out = Truth {
         voltage: Vec::with_capacity(n),
@@ -113,7 +121,11 @@ pub fn simulate(motor: &Motor, input: &Staircase, dt: f64, n: usize) -> Truth {
                 let frac = (x.w / (x.w - x1.w)).clamp(0.0, 1.0);
                 let mut xa = heun(motor, e, x, frac * step, moving);
                 xa.w = 0.0;
-                moving = if (k * xa.i).abs() > ts { xa.i.signum() } else { 0.0 };
+                moving = if (k * xa.i).abs() > ts {
+                    xa.i.signum()
+                } else {
+                    0.0
+                };
                 x = heun(motor, e, xa, (1.0 - frac) * step, moving);
                 if moving != 0.0 && x.w * moving < 0.0 {
                     x.w = 0.0;
@@ -159,13 +171,22 @@ impl Rng {
 
 /// A `bits`-bit ADC over `[lo, hi]` with Gaussian noise of `noise_lsb` LSB before conversion:
 /// returns the readings and one LSB.
-pub fn adc(values: &[f64], lo: f64, hi: f64, bits: u32, noise_lsb: f64, rng: &mut Rng) -> (Vec<f64>, f64) {
+pub fn adc(
+    values: &[f64],
+    lo: f64,
+    hi: f64,
+    bits: u32,
+    noise_lsb: f64,
+    rng: &mut Rng,
+) -> (Vec<f64>, f64) {
     let top = f64::from((1u32 << bits) - 1);
     let lsb = (hi - lo) / top;
     let read = values
         .iter()
         .map(|v| {
-            let code = ((v + noise_lsb * lsb * rng.normal() - lo) / lsb).round().clamp(0.0, top);
+            let code = ((v + noise_lsb * lsb * rng.normal() - lo) / lsb)
+                .round()
+                .clamp(0.0, top);
             lo + code * lsb
         })
         .collect();
@@ -205,7 +226,14 @@ pub fn log(
         0.0
     };
     let (voltage, voltage_lsb) = adc(&truth.voltage, v_lo, v_hi, 10, voltage_noise_lsb, rng);
-    let (current, current_lsb) = adc(&truth.current, i_lo, 1.2 * i_max * stretch, 10, noise_lsb, rng);
+    let (current, current_lsb) = adc(
+        &truth.current,
+        i_lo,
+        1.2 * i_max * stretch,
+        10,
+        noise_lsb,
+        rng,
+    );
     Logged {
         voltage,
         current,
@@ -259,11 +287,24 @@ pub fn step_pair_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], usi
         let motor = run_motor(&mut rng);
         let mut logged = Vec::new();
         for volts in [40.0, 2.5] {
-            let at = if cfg.subsample_step { rng.uniform() * dt } else { 0.0 };
-            let input = Staircase { levels: vec![(at, volts)] };
+            let at = if cfg.subsample_step {
+                rng.uniform() * dt
+            } else {
+                0.0
+            };
+            let input = Staircase {
+                levels: vec![(at, volts)],
+            };
             let truth = simulate(&motor, &input, dt, n);
             let stretch = 1.0 + 0.05 * rng.uniform();
-            let rec = log(&truth, (0.0, 1.2 * volts * stretch), cfg.voltage_noise_lsb, cfg.noise_lsb, stretch, &mut rng);
+            let rec = log(
+                &truth,
+                (0.0, 1.2 * volts * stretch),
+                cfg.voltage_noise_lsb,
+                cfg.noise_lsb,
+                stretch,
+                &mut rng,
+            );
             logged.push(rec);
         }
         let t: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
@@ -301,7 +342,11 @@ pub fn step_pair_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], usi
         let with_speed: Vec<StepTest> = tests
             .iter()
             .zip(&speeds)
-            .map(|(s, w)| StepTest { speed: Some(w), position: None, ..*s })
+            .map(|(s, w)| StepTest {
+                speed: Some(w),
+                position: None,
+                ..*s
+            })
             .collect();
         let start = identify_paper(&with_speed[0], &with_speed[1], LmSettings::default())
             .map(|p| p.params)
@@ -320,18 +365,29 @@ pub fn step_pair_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], usi
 /// Coverage of the output-error fit's 95 % intervals over `runs` staircase records (40 V,
 /// −20 V, 0 V, 2.5 V over 140 s; or 40 V then 0 V over 150 s with `return_to_zero`).
 pub fn output_error_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], usize) {
-    use fit::{equation_error_start, identify_output_error_with_inputs, voltage_levels, ExcitedRecord, LmSettings};
+    use fit::{
+        equation_error_start, identify_output_error_with_inputs, voltage_levels, ExcitedRecord,
+        LmSettings,
+    };
     let dt = 1e-3;
     let mut inside = [0; 6];
     let mut with_ci = 0;
     for run in 0..runs {
         let mut rng = Rng::new(seed.wrapping_mul(1_000_003).wrapping_add(run));
         let motor = run_motor(&mut rng);
-        let shift = if cfg.subsample_step { rng.uniform() * dt } else { 0.0 };
+        let shift = if cfg.subsample_step {
+            rng.uniform() * dt
+        } else {
+            0.0
+        };
         let (levels, duration, range) = if cfg.return_to_zero {
             (vec![(0.5, 40.0), (100.5, 0.0)], 150.0, (0.0, 48.0))
         } else {
-            (vec![(0.5, 40.0), (40.5, -20.0), (80.5, 0.0), (100.5, 2.5)], 140.0, (-48.0, 48.0))
+            (
+                vec![(0.5, 40.0), (40.5, -20.0), (80.5, 0.0), (100.5, 2.5)],
+                140.0,
+                (-48.0, 48.0),
+            )
         };
         let input = Staircase {
             levels: levels.iter().map(|&(t, v)| (t + shift, v)).collect(),
@@ -339,7 +395,14 @@ pub fn output_error_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], 
         let n = (duration / dt) as usize + 1;
         let truth = simulate(&motor, &input, dt, n);
         let stretch = 1.0 + 0.05 * rng.uniform();
-        let rec = log(&truth, (range.0 * stretch, range.1 * stretch), cfg.voltage_noise_lsb, cfg.noise_lsb, stretch, &mut rng);
+        let rec = log(
+            &truth,
+            (range.0 * stretch, range.1 * stretch),
+            cfg.voltage_noise_lsb,
+            cfg.noise_lsb,
+            stretch,
+            &mut rng,
+        );
         let t: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
         let (u, priors) = voltage_levels(&t, &rec.voltage, Some(rec.voltage_lsb)).expect("levels");
         let records = [ExcitedRecord {
@@ -352,8 +415,9 @@ pub fn output_error_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], 
             exclude_speed: None,
         }];
         let start = equation_error_start(&records).expect("start");
-        let fit = identify_output_error_with_inputs(&records, &[priors], &start, LmSettings::default())
-            .expect("output-error fit");
+        let fit =
+            identify_output_error_with_inputs(&records, &[priors], &start, LmSettings::default())
+                .expect("output-error fit");
         if fit.ci95.is_some() {
             with_ci += 1;
         }
