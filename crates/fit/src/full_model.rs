@@ -405,10 +405,15 @@ impl NuisanceProblem for FullProblem {
 
     fn set_nuisance(&mut self, j: usize, value: f64) {
         if let Some(&(k, slot)) = self.nuisance_slots().get(j) {
+            let (_, t_first, u) = self.inputs[k];
             let w = &mut self.tests[k];
             match slot {
                 0 => w.volts = value,
-                1 => w.t_first = value,
+                // The instant stays in the period its uniform prior spans (±√(3V)).
+                1 => {
+                    let half = (3.0 * u.delay_variance_s2).sqrt();
+                    w.t_first = value.min(t_first + half).max(t_first - half).max(0.0);
+                }
                 _ => w.current_offset = value,
             }
         }

@@ -582,15 +582,23 @@ impl NuisanceProblem for OeProblem {
 
     fn set_nuisance(&mut self, j: usize, value: f64) {
         if let Some(&(k, level, slot)) = self.nuisance_slots().get(j) {
-            let gap = 1e-9 * self.records[k].dt;
-            if let Input::Piecewise { times_s, volts } = &mut self.records[k].input {
+            let rec = &mut self.records[k];
+            let gap = 1e-9 * rec.dt;
+            let (_, start, prior) = rec.priors.get(level).copied().unwrap_or_default();
+            let half = (3.0 * prior.start_variance_s2).sqrt();
+            if let Input::Piecewise { times_s, volts } = &mut rec.input {
                 match slot {
                     0 => volts[level] = value,
-                    // A start may not pass its neighbours (nor 0).
+                    // A start stays in the period its uniform prior spans (±√(3V)), and
+                    // may not pass its neighbours (nor 0).
                     _ => {
                         let lo = if level == 0 { 0.0 } else { times_s[level - 1] };
                         let hi = times_s.get(level + 1).copied().unwrap_or(f64::INFINITY);
-                        times_s[level] = value.min(hi - gap).max(lo + gap);
+                        times_s[level] = value
+                            .min(start + half)
+                            .max(start - half)
+                            .min(hi - gap)
+                            .max(lo + gap);
                     }
                 }
             }
