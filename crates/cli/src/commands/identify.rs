@@ -109,6 +109,7 @@ pub fn load_step(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedStep
     let (exclude_current, exclude_speed) = check_clipping(&shown, &loaded, quiet)?;
     let label = file_lines(&shown, &loaded.lines);
     let mut step = step_from_record_with(label, loaded.record, loaded.voltage_lsb)?;
+    step.inputs.current_lsb_a = loaded.current_lsb.unwrap_or(0.0);
     step.path = shown;
     let from = loaded.lines.len() - step.current.len();
     step.exclude_current = exclude_current.map(|m| m[from..].to_vec());
