@@ -69,11 +69,13 @@ fn bad(series: impl Into<String>, reason: String) -> FitError {
 ///
 /// When the voltage is piecewise constant (a step, staircase, PRBS or reversal: jumps larger
 /// than 10 noise levels and 0.1 % of the range, at most one per 20 samples, flat in between to
-/// within 4 noise levels) each level is the mean of its samples — the ADC noise averages out —
-/// and starts at its first sample. Otherwise the samples themselves are replayed, linearly
-/// interpolated. `t` must be uniform (0.1 %).
+/// within 4 noise levels) each level is estimated from its samples ([`crate::estimate_level`]:
+/// the mean — the ADC noise averages out — or the censored fit at an ADC rail) and starts at
+/// its first sample ([`voltage_levels`] puts it where it is expected, half a period earlier).
+/// Otherwise the samples themselves are replayed, linearly interpolated. `t` must be uniform
+/// (0.1 %).
 pub fn voltage_input(t: &[f64], voltage: &[f64]) -> Result<Input, FitError> {
-    voltage_levels(t, voltage, None).map(|(input, _)| input)
+    rebuild_voltage(t, voltage, None, false).map(|(input, _)| input)
 }
 
 /// [`voltage_input`] with what the record leaves unknown about each level of a
@@ -86,6 +88,17 @@ pub fn voltage_levels(
     t: &[f64],
     voltage: &[f64],
     quantum_v: Option<f64>,
+) -> Result<(Input, Vec<LevelPrior>), FitError> {
+    rebuild_voltage(t, voltage, quantum_v, true)
+}
+
+/// The waveform of a voltage column and its level priors; with `expected_starts` each change
+/// starts half a period before its first sample, otherwise at it.
+fn rebuild_voltage(
+    t: &[f64],
+    voltage: &[f64],
+    quantum_v: Option<f64>,
+    expected_starts: bool,
 ) -> Result<(Input, Vec<LevelPrior>), FitError> {
     if t.len() != voltage.len() {
         return Err(bad(
@@ -141,7 +154,8 @@ pub fn voltage_levels(
         let (start, start_variance_s2) = if s == 0 {
             (0.0, 0.0)
         } else {
-            (t[s] - t[0] - 0.5 * dt, dt * dt / 12.0)
+            let lead = if expected_starts { 0.5 * dt } else { 0.0 };
+            (t[s] - t[0] - lead, dt * dt / 12.0)
         };
         steps.push((start, level.volts));
         priors.push(LevelPrior {
