@@ -264,6 +264,18 @@ fn run_motor(rng: &mut Rng) -> Motor {
 }
 
 fn covered(fit: &fit::FullFit, truth: &Motor, inside: &mut [usize; 6]) {
+    if std::env::var_os("COVERAGE_VERBOSE").is_some() {
+        // Each parameter's error in units of its 95 % half-width (|z| > 1: a miss).
+        let z: Vec<String> = fit.ci95.map_or(Vec::new(), |ci| {
+            (0..6)
+                .map(|k| {
+                    let v = fit.params.values()[k];
+                    format!("{:+.2}", (v - truth[k]) / (0.5 * (ci[k][1] - ci[k][0])))
+                })
+                .collect()
+        });
+        eprintln!("error / half-width: {}", z.join(" "));
+    }
     if let Some(ci) = fit.ci95 {
         for k in 0..6 {
             if ci[k][0] <= truth[k] && truth[k] <= ci[k][1] {
@@ -375,10 +387,13 @@ pub fn output_error_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], 
     for run in 0..runs {
         let mut rng = Rng::new(seed.wrapping_mul(1_000_003).wrapping_add(run));
         let motor = run_motor(&mut rng);
-        let shift = if cfg.subsample_step {
-            rng.uniform() * dt
-        } else {
-            0.0
+        // Each change at its own place within a sample period (an asynchronous switch).
+        let mut shift = || {
+            if cfg.subsample_step {
+                rng.uniform() * dt
+            } else {
+                0.0
+            }
         };
         let (levels, duration, range) = if cfg.return_to_zero {
             (vec![(0.5, 40.0), (100.5, 0.0)], 150.0, (0.0, 48.0))
@@ -390,7 +405,7 @@ pub fn output_error_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], 
             )
         };
         let input = Staircase {
-            levels: levels.iter().map(|&(t, v)| (t + shift, v)).collect(),
+            levels: levels.iter().map(|&(t, v)| (t + shift(), v)).collect(),
         };
         let n = (duration / dt) as usize + 1;
         let truth = simulate(&motor, &input, dt, n);
