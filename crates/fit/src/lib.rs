@@ -5,6 +5,9 @@
 //! - [`fit_33`]: the fit of the paper's Eq. (33) to a normalised high-voltage current.
 //! - [`uncertainty`]: covariance, 95 % intervals (Student t, as MATLAB's `nlparci`) and
 //!   correlations; [`student_t_quantile`].
+//! - [`identify_full_with_inputs`], [`identify_output_error_with_inputs`]: the step heights,
+//!   levels and instants as measured inputs whose uncertainty enters the intervals
+//!   ([`estimate_level`], [`StepInputs`], [`LevelPrior`]).
 //!
 //! It does no I/O: records come in as slices, results go out as values.
 //!
