@@ -171,6 +171,21 @@ pub struct MontecarloArgs {
     /// First noise seed; run i uses seeds derived from it.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Noise on the voltage channel [LSB] (default: --noise-lsb).
+    #[arg(long)]
+    pub voltage_noise_lsb: Option<f64>,
+    /// Put each step at a random instant within the sample period before its first sample
+    /// (a real logger's step falls between samples), instead of on a sample.
+    #[arg(long)]
+    pub subsample_step: bool,
+    /// Relative standard deviation of a random change of every motor parameter per run (runs
+    /// differ even without noise), e.g. 0.02.
+    #[arg(long, default_value_t = 0.0)]
+    pub motor_spread: f64,
+    /// Stretch every conditioning range by a random 0-5 % per record, so that a level's place
+    /// between two ADC codes differs from run to run.
+    #[arg(long)]
+    pub vary_range: bool,
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,

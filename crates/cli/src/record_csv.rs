@@ -133,6 +133,10 @@ pub struct Loaded {
     pub lines: Vec<usize>,
     /// Samples of voltage, current and speed at an ADC rail.
     pub clipped: [Vec<bool>; 3],
+    /// One ADC step of the voltage channel \[V\], from the `# measurement:` metadata, if given.
+    pub voltage_lsb: Option<f64>,
+    /// One ADC step of the current channel \[A\], likewise.
+    pub current_lsb: Option<f64>,
 }
 
 impl Loaded {
@@ -522,6 +526,15 @@ fn check_unit_plausibility(
     Ok(())
 }
 
+/// One ADC step of analog channel `c` (0 voltage \[V\], 1 current \[A\], 2 speed \[rad/s\])
+/// stated by the `# measurement:` metadata.
+fn adc_lsb(table: &Table, c: usize) -> Option<f64> {
+    let m = table
+        .meta("measurement")
+        .and_then(|text| serde_json::from_str::<motor_model::MeasurementModel>(text).ok())?;
+    Some(m.adc?.lsb((*m.ranges.get(c)?)?))
+}
+
 /// Maps a table's columns to a record (SPEC section 4): names or aliases, units converted, `t`
 /// strictly increasing, `current` required, `voltage` required when `need_voltage`; finds the
 /// samples at an ADC rail.
@@ -630,6 +643,8 @@ fn to_record(
         record,
         lines: table.lines.clone(),
         clipped: masks,
+        voltage_lsb: adc_lsb(table, 0),
+        current_lsb: adc_lsb(table, 1),
     })
 }
 

@@ -1,59 +1,57 @@
-//! Coverage of the output-error intervals on a noisy staircase of the paper's motor:
-//! `cargo run --release -p fit --example output_error_coverage [RUNS]` prints each run's
-//! relative errors and how many 95 % intervals contained the truth.
-use fit::{equation_error_start, identify_output_error, voltage_input, ExcitedRecord, LmSettings};
-use motor_model::{Effects, Input, MeasurementModel, MotorParams, Simulator};
+//! Coverage of the 95 % intervals on records of the reference simulator and logger written
+//! apart from `motor_model` (`crates/fit/tests/reference/mod.rs`: Heun integration with
+//! located breakaway and reversals, its own quantiser and noise), each run's motor and ADC
+//! ranges varied:
+//!
+//! `cargo run --release -p fit --example output_error_coverage -- [RUNS] [--full]
+//!  [--noise-lsb X] [--voltage-noise-lsb X] [--subsample-step] [--return-to-zero] [--seed N]`
+//!
+//! Output error on a staircase (40, −20, 0, 2.5 V; or 40 V then back to 0 V on a unipolar
+//! voltage range with `--return-to-zero`), or with `--full` the step-pair full fit (40 V and
+//! 2.5 V). Prints how many intervals of each parameter contained the truth.
+#[path = "../tests/reference/mod.rs"]
+mod reference;
+
+use reference::{output_error_coverage, step_pair_coverage, Config};
+
 fn main() {
-    let truth = MotorParams::paper();
-    let u = Input::piecewise(&[(0.5, 40.0), (40.5, -20.0), (80.5, 0.0), (100.5, 2.5)]).unwrap();
-    let trace = Simulator::new(truth, Effects::none(), u)
-        .unwrap()
-        .run(140.0, 1000.0)
-        .unwrap();
-    let mut inside = [0; 6];
-    let runs: u64 = std::env::args()
-        .nth(1)
-        .and_then(|a| a.parse().ok())
-        .unwrap_or(20);
-    for seed in 0..runs {
-        let rec = MeasurementModel::paper_logger(&trace, seed)
-            .apply(&trace)
-            .unwrap();
-        let input = voltage_input(&rec.t, &rec.voltage).unwrap();
-        let r = [ExcitedRecord {
-            input: &input,
-            dt: 1e-3,
-            current: &rec.current,
-            speed: None,
-            position: rec.position.as_deref(),
-            exclude_current: None,
-            exclude_speed: None,
-        }];
-        let t0 = std::time::Instant::now();
-        let start = equation_error_start(&r).unwrap();
-        let fit = identify_output_error(&r, &start, LmSettings::default()).unwrap();
-        let ci = fit.ci95.unwrap();
-        let errs: Vec<String> = fit
-            .params
-            .values()
-            .iter()
-            .zip(truth.values())
-            .enumerate()
-            .map(|(k, (g, w))| {
-                if ci[k][0] <= w && w <= ci[k][1] {
-                    inside[k] += 1;
-                }
-                format!("{:+.4}%", 100.0 * (g - w) / w)
-            })
-            .collect();
-        println!(
-            "seed {seed}: {} ({} iterations, {:.2} s)",
-            errs.join(" "),
-            fit.iterations,
-            t0.elapsed().as_secs_f64()
-        );
-    }
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let value = |name: &str, default: f64| -> f64 {
+        args.iter()
+            .position(|a| a == name)
+            .and_then(|i| args.get(i + 1))
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(default)
+    };
+    let flag = |name: &str| args.iter().any(|a| a == name);
+    let runs: u64 = args.first().and_then(|a| a.parse().ok()).unwrap_or(20);
+    let noise = value("--noise-lsb", 1.0);
+    let cfg = Config {
+        noise_lsb: noise,
+        voltage_noise_lsb: value("--voltage-noise-lsb", noise),
+        subsample_step: flag("--subsample-step"),
+        return_to_zero: flag("--return-to-zero"),
+    };
+    let seed = value("--seed", 1.0) as u64;
+    let started = std::time::Instant::now();
+    let (inside, with_ci) = if flag("--full") {
+        step_pair_coverage(runs, cfg, seed)
+    } else {
+        output_error_coverage(runs, cfg, seed)
+    };
+    println!(
+        "{} method, {cfg:?}: {runs} runs, {with_ci} with intervals, {:.0} s",
+        if flag("--full") {
+            "full step-pair"
+        } else {
+            "output-error"
+        },
+        started.elapsed().as_secs_f64()
+    );
     for (name, n) in fit::PARAM_NAMES.iter().zip(inside) {
-        println!("{name}: {n}/{runs} intervals contain the truth");
+        println!(
+            "{name}: {n}/{runs} intervals contain the truth ({:.1} %)",
+            100.0 * n as f64 / runs as f64
+        );
     }
 }

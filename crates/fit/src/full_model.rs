@@ -12,6 +12,9 @@ use motor_model::{Dual, MotorParams, MotorState, Real, StepResponse};
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::FitError;
+use crate::input_uncertainty::{
+    fit_with_inputs, settled_current, Nuisance, NuisanceProblem, StepInputs,
+};
 use crate::lm::{solve, LeastSquares, LmSettings, NormalEquations, Termination};
 use crate::plausibility::{assess, RecordFacts, Refusal};
 use crate::stats::{sandwich_uncertainty, NeweyWest};
@@ -215,11 +218,18 @@ struct Weighted {
     dt: f64,
     n: usize,
     channels: Vec<ChannelData>,
+    /// Offset \[A\] added to the model current from sample `settled_from` on: the settled
+    /// current's quantisation error, an uncertain input (0 as estimated).
+    current_offset: f64,
+    /// First sample of the settled current, with the variance of its offset \[A²\], if any.
+    settled: Option<(usize, f64)>,
 }
 
 struct FullProblem {
     tests: Vec<Weighted>,
     n_residuals: usize,
+    /// Per test: the step height and `t_first` as estimated, and their uncertainty.
+    inputs: Vec<(f64, f64, StepInputs)>,
 }
 
 fn params_of<T: Real>(theta: &[f64], make: impl Fn(f64, usize) -> T) -> Option<[T; 6]> {
@@ -269,7 +279,10 @@ impl FullProblem {
             response.for_each_sample(w.t_first, w.dt, n, |i, s: MotorState<T>| {
                 for (c, ch) in w.channels.iter().enumerate() {
                     let model = match ch.kind {
-                        Channel::Current => s.current_a,
+                        Channel::Current => match w.settled {
+                            Some((from, _)) if i >= from => s.current_a + T::cst(w.current_offset),
+                            _ => s.current_a,
+                        },
                         Channel::Speed => s.speed_rad_s,
                         Channel::EncoderSpeed => continue,
                     };
@@ -359,13 +372,143 @@ impl LeastSquares for FullProblem {
     }
 }
 
+/// Relative step of the central difference in a step height.
+const VOLTS_DIFF_STEP: f64 = 1e-5;
+/// Step of the central difference in a step instant, as a fraction of the sample period.
+const DELAY_DIFF_STEP: f64 = 1e-3;
+
+impl FullProblem {
+    /// The test and input (0: step height, 1: `t_first`, 2: settled-current offset) of
+    /// nuisance `j`.
+    fn nuisance_slots(&self) -> Vec<(usize, usize)> {
+        let mut out = Vec::new();
+        for (k, (_, _, u)) in self.inputs.iter().enumerate() {
+            if u.volts_variance_v2 > 0.0 {
+                out.push((k, 0));
+            }
+            if u.delay_variance_s2 > 0.0 {
+                out.push((k, 1));
+            }
+            if self.tests[k].settled.is_some() {
+                out.push((k, 2));
+            }
+        }
+        out
+    }
+}
+
+impl NuisanceProblem for FullProblem {
+    fn nuisances(&self) -> Vec<Nuisance> {
+        self.nuisance_slots()
+            .into_iter()
+            .map(|(k, slot)| {
+                let w = &self.tests[k];
+                let (volts, t_first, u) = self.inputs[k];
+                if slot == 0 {
+                    Nuisance {
+                        value: w.volts,
+                        prior_mean: volts,
+                        prior_variance: u.volts_variance_v2,
+                        step: VOLTS_DIFF_STEP * volts.abs().max(1e-3),
+                    }
+                } else if slot == 2 {
+                    let variance = w.settled.map_or(0.0, |(_, v)| v);
+                    Nuisance {
+                        value: w.current_offset,
+                        prior_mean: 0.0,
+                        prior_variance: variance,
+                        step: 1e-3 * variance.sqrt(),
+                    }
+                } else {
+                    Nuisance {
+                        value: w.t_first,
+                        prior_mean: t_first,
+                        prior_variance: u.delay_variance_s2,
+                        step: DELAY_DIFF_STEP * w.dt,
+                    }
+                }
+            })
+            .collect()
+    }
+
+    fn set_nuisance(&mut self, j: usize, value: f64) {
+        if let Some(&(k, slot)) = self.nuisance_slots().get(j) {
+            let (_, t_first, u) = self.inputs[k];
+            let w = &mut self.tests[k];
+            match slot {
+                0 => w.volts = value,
+                // The instant stays in the period its uniform prior spans (±√(3V)).
+                1 => {
+                    let half = (3.0 * u.delay_variance_s2).sqrt();
+                    w.t_first = value.min(t_first + half).max(t_first - half).max(0.0);
+                }
+                _ => w.current_offset = value,
+            }
+        }
+    }
+
+    fn linear_parts(&self, theta: &[f64]) -> Option<(Vec<f64>, DMatrix<f64>)> {
+        let params = params_of::<Dual<6>>(theta, Dual::variable)?;
+        let mut r = Vec::with_capacity(self.n_residuals);
+        let mut rows: Vec<[f64; 6]> = Vec::with_capacity(self.n_residuals);
+        self.for_each(params, |_, _, _, m, y, sigma| {
+            r.push((m.v - y) / sigma);
+            rows.push(m.d.map(|d| d / sigma));
+        });
+        let jac = DMatrix::from_fn(rows.len(), 6, |i, j| rows[i][j]);
+        Some((r, jac))
+    }
+
+    fn residual_vector(&self, theta: &[f64]) -> Option<Vec<f64>> {
+        let params = params_of::<f64>(theta, |v, _| v)?;
+        let mut r = Vec::with_capacity(self.n_residuals);
+        self.for_each(params, |_, _, _, m, y, sigma| r.push((m - y) / sigma));
+        r.iter().all(|v| v.is_finite()).then_some(r)
+    }
+}
+
 /// Identifies R, L, k, f, J, Ts from `tests` (at least one; the paper uses a high- and a
-/// low-voltage step), starting from `start` (e.g. the paper method's result).
+/// low-voltage step), starting from `start` (e.g. the paper method's result). The step heights
+/// and instants are taken as exact: see [`identify_full_with_inputs`] for measured ones.
 pub fn identify_full(
     tests: &[StepTest<'_>],
     start: &MotorParams,
     settings: LmSettings,
 ) -> Result<FullFit, FitError> {
+    identify_full_with_inputs(tests, &[], start, settings)
+}
+
+/// [`identify_full`] with what each test leaves unknown about its input (`inputs`, one per test,
+/// or empty for exact inputs): the step height's variance, and the step instant's expected
+/// delay before the first sample and its variance. The fit moves these inputs where the records
+/// put them and widens the intervals by what remains unknown (see [`crate::StepInputs`]).
+pub fn identify_full_with_inputs(
+    tests: &[StepTest<'_>],
+    inputs: &[StepInputs],
+    start: &MotorParams,
+    settings: LmSettings,
+) -> Result<FullFit, FitError> {
+    if !inputs.is_empty() && inputs.len() != tests.len() {
+        return Err(FitError::BadData {
+            series: "step inputs".into(),
+            reason: format!(
+                "{} input uncertainties for {} tests: give one per test, or none",
+                inputs.len(),
+                tests.len()
+            ),
+        });
+    }
+    if let Some((k, _)) = inputs.iter().enumerate().find(|(_, u)| {
+        ![u.volts_variance_v2, u.delay_variance_s2]
+            .iter()
+            .all(|v| v.is_finite() && *v >= 0.0)
+            || !u.delay_s.is_finite()
+    }) {
+        return Err(FitError::BadData {
+            series: format!("test {} inputs", k + 1),
+            reason: "variances must be finite and ≥ 0, the delay finite".into(),
+        });
+    }
     start
         .validate()
         .map_err(FitError::model("start parameters"))?;
@@ -411,19 +554,33 @@ pub fn identify_full(
             (None, None) => {}
         }
         n_residuals += channels.iter().map(ChannelData::fitted).sum::<usize>();
+        let input = inputs.get(k).copied().unwrap_or_default();
         weighted.push(Weighted {
             volts: t.volts,
-            t_first: t.t_first,
+            t_first: t.t_first + input.delay_s,
             dt: t.dt,
             n,
             channels,
+            current_offset: 0.0,
+            settled: settled_current(t.current, input.current_lsb_a),
         });
     }
+    let inputs = weighted
+        .iter()
+        .zip(
+            inputs
+                .iter()
+                .copied()
+                .chain(std::iter::repeat(StepInputs::default())),
+        )
+        .map(|(w, u)| (w.volts, w.t_first, u))
+        .collect();
     let mut problem = FullProblem {
         tests: weighted,
         n_residuals,
+        inputs,
     };
-    fit_weighted(&mut problem, start, settings)
+    fit_with_inputs(&mut problem, start, settings)
 }
 
 /// A least-squares problem in `θ = ln [R, L, k, f, J, Ts]` whose residuals are channels of

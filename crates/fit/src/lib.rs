@@ -5,6 +5,9 @@
 //! - [`fit_33`]: the fit of the paper's Eq. (33) to a normalised high-voltage current.
 //! - [`uncertainty`]: covariance, 95 % intervals (Student t, as MATLAB's `nlparci`) and
 //!   correlations; [`student_t_quantile`].
+//! - [`identify_full_with_inputs`], [`identify_output_error_with_inputs`]: the step heights,
+//!   levels and instants as measured inputs whose uncertainty enters the intervals
+//!   ([`estimate_level`], [`StepInputs`], [`LevelPrior`]).
 //!
 //! It does no I/O: records come in as slices, results go out as values.
 //!
@@ -28,6 +31,7 @@ mod checks;
 mod clipping;
 mod error;
 mod full_model;
+mod input_uncertainty;
 mod lm;
 mod mechanical;
 mod model33;
@@ -46,7 +50,11 @@ pub use checks::{
 pub use clipping::{find_clipping, MIN_CLIPPED_RUN};
 pub use error::FitError;
 pub use full_model::{
-    identify_full, noise_std, Channel, ChannelQuality, FullFit, StepTest, PARAM_NAMES, PARAM_UNITS,
+    identify_full, identify_full_with_inputs, noise_std, Channel, ChannelQuality, FullFit,
+    StepTest, PARAM_NAMES, PARAM_UNITS,
+};
+pub use input_uncertainty::{
+    estimate_level, quantisation_bias_variance, LevelEstimate, LevelPrior, StepInputs, VoltageScale,
 };
 pub use lm::{
     solve, LeastSquares, LevenbergMarquardt, LmReport, LmSettings, NormalEquations, Termination,
@@ -56,7 +64,8 @@ pub use mechanical::{
 };
 pub use model33::{fit_33, Fit33, Params33, Record33};
 pub use output_error::{
-    electrical_equation, equation_error_start, identify_output_error, voltage_input, ExcitedRecord,
+    electrical_equation, equation_error_start, identify_output_error,
+    identify_output_error_with_inputs, voltage_input, voltage_levels, ExcitedRecord,
 };
 pub use paper_method::{
     from_high_voltage, identify_paper, speed_check_c8, suggested_low_voltage_45,
@@ -70,4 +79,4 @@ pub use stats::{
     newey_west_lags, sandwich_uncertainty, student_t_quantile, uncertainty, NeweyWest, Uncertainty,
 };
 pub use steady_fit::{fit_apparent_resistance, SteadyFit};
-pub use step_location::{locate_step, StepLocation};
+pub use step_location::{locate_step, locate_step_with, StepLocation};

@@ -21,6 +21,10 @@ use crate::error::FitError;
 use crate::full_model::{
     fit_weighted, noise_std, quality_from_sums, Channel, ChannelQuality, FullFit, WeightedProblem,
 };
+use crate::input_uncertainty::{
+    estimate_level, fit_with_inputs, LevelEstimate, LevelPrior, Nuisance, NuisanceProblem,
+    VoltageScale,
+};
 use crate::lm::{LeastSquares, LmSettings, NormalEquations};
 use crate::mechanical::{identify_inverse_model, InverseModelSettings};
 use crate::plausibility::RecordFacts;
@@ -70,10 +74,37 @@ fn bad(series: impl Into<String>, reason: String) -> FitError {
 ///
 /// When the voltage is piecewise constant (a step, staircase, PRBS or reversal: jumps larger
 /// than 10 noise levels and 0.1 % of the range, at most one per 20 samples, flat in between to
-/// within 4 noise levels) each level is the mean of its samples — the ADC noise averages out —
-/// and starts at its first sample. Otherwise the samples themselves are replayed, linearly
-/// interpolated. `t` must be uniform (0.1 %).
+/// within 4 noise levels) each level is estimated from its samples ([`crate::estimate_level`]:
+/// the mean — the ADC noise averages out — or the censored fit at an ADC rail) and starts at
+/// its first sample ([`voltage_levels`] puts it where it is expected, half a period earlier).
+/// Otherwise the samples themselves are replayed, linearly interpolated. `t` must be uniform
+/// (0.1 %).
 pub fn voltage_input(t: &[f64], voltage: &[f64]) -> Result<Input, FitError> {
+    rebuild_voltage(t, voltage, None, false).map(|(input, _)| input)
+}
+
+/// [`voltage_input`] with what the record leaves unknown about each level of a
+/// piecewise-constant voltage (empty for a replayed waveform): the level is estimated by
+/// [`crate::estimate_level`] (the mean, or the censored fit at an ADC rail; `quantum_v` \[V\]
+/// is the voltage's ADC step if known) with its variance, and a level after the first starts
+/// half a sample period before its first sample (the change fell anywhere in that period,
+/// variance `dt²/12`). Pass both to [`identify_output_error_with_inputs`].
+pub fn voltage_levels(
+    t: &[f64],
+    voltage: &[f64],
+    quantum_v: Option<f64>,
+) -> Result<(Input, Vec<LevelPrior>), FitError> {
+    rebuild_voltage(t, voltage, quantum_v, true)
+}
+
+/// The waveform of a voltage column and its level priors; with `expected_starts` each change
+/// starts half a period before its first sample, otherwise at it.
+fn rebuild_voltage(
+    t: &[f64],
+    voltage: &[f64],
+    quantum_v: Option<f64>,
+    expected_starts: bool,
+) -> Result<(Input, Vec<LevelPrior>), FitError> {
     if t.len() != voltage.len() {
         return Err(bad(
             "voltage",
@@ -101,11 +132,17 @@ pub fn voltage_input(t: &[f64], voltage: &[f64]) -> Result<Input, FitError> {
             starts.push(i);
         }
     }
-    let sampled = || Input::sampled(0.0, dt, voltage.to_vec());
+    let sampled = || {
+        Input::sampled(0.0, dt, voltage.to_vec())
+            .map(|i| (i, Vec::new()))
+            .map_err(FitError::model("voltage"))
+    };
     if starts.len() * MIN_SAMPLES_PER_LEVEL > voltage.len() {
-        return sampled().map_err(FitError::model("voltage"));
+        return sampled();
     }
+    let scale = VoltageScale::of(voltage, quantum_v);
     let mut steps = Vec::with_capacity(starts.len());
+    let mut priors = Vec::with_capacity(starts.len());
     for (j, &s) in starts.iter().enumerate() {
         let e = starts.get(j + 1).copied().unwrap_or(voltage.len());
         let seg = &voltage[s..e];
@@ -113,11 +150,26 @@ pub fn voltage_input(t: &[f64], voltage: &[f64]) -> Result<Input, FitError> {
         let rms = (seg.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / seg.len() as f64).sqrt();
         if rms > 4.0 * sigma + 1e-3 * (hi - lo) {
             // Not flat between jumps (a sine, a ramp): replay the samples.
-            return sampled().map_err(FitError::model("voltage"));
+            return sampled();
         }
-        steps.push((t[s] - t[0], mean));
+        let level = estimate_level(seg, &scale).unwrap_or(LevelEstimate {
+            volts: mean,
+            variance_v2: 0.0,
+        });
+        let (start, start_variance_s2) = if s == 0 {
+            (0.0, 0.0)
+        } else {
+            let lead = if expected_starts { 0.5 * dt } else { 0.0 };
+            (t[s] - t[0] - lead, dt * dt / 12.0)
+        };
+        steps.push((start, level.volts));
+        priors.push(LevelPrior {
+            volts_variance_v2: level.variance_v2,
+            start_variance_s2,
+        });
     }
-    Input::piecewise(&steps).map_err(FitError::model("voltage"))
+    let input = Input::piecewise(&steps).map_err(FitError::model("voltage"))?;
+    Ok((input, priors))
 }
 
 /// A channel of one record: its data at the kept samples and its weight.
@@ -132,6 +184,8 @@ struct OeChannel {
 
 struct OeRecord {
     input: Input,
+    /// Per level of a piecewise input: its value and start as estimated, and their uncertainty.
+    priors: Vec<(f64, f64, LevelPrior)>,
     dt: f64,
     n: usize,
     channels: Vec<OeChannel>,
@@ -424,6 +478,7 @@ fn prepare(k: usize, rec: &ExcitedRecord<'_>) -> Result<OeRecord, FitError> {
         (None, None) => {}
     }
     Ok(OeRecord {
+        priors: Vec::new(),
         input: rec.input.clone(),
         dt: rec.dt,
         n,
@@ -462,6 +517,164 @@ pub fn identify_output_error(
         )
     })?;
     fit_weighted(&mut problem, start, settings)
+}
+
+/// [`identify_output_error`] with what each record leaves unknown about its voltage levels
+/// (`priors[k]` for record `k`, from [`voltage_levels`], one per level of its piecewise input;
+/// or no priors at all): the fit moves the levels and their start instants where the records
+/// put them and widens the intervals by what remains unknown (see [`crate::StepInputs`]).
+pub fn identify_output_error_with_inputs(
+    records: &[ExcitedRecord<'_>],
+    priors: &[Vec<LevelPrior>],
+    start: &MotorParams,
+    settings: LmSettings,
+) -> Result<FullFit, FitError> {
+    if priors.is_empty() {
+        return identify_output_error(records, start, settings);
+    }
+    if priors.len() != records.len() {
+        return Err(bad(
+            "level priors",
+            format!(
+                "{} lists for {} records: give one per record, or none",
+                priors.len(),
+                records.len()
+            ),
+        ));
+    }
+    start
+        .validate()
+        .map_err(|e| bad("start parameters", e.to_string()))?;
+    if start.ts_nm <= 0.0 {
+        return Err(bad(
+            "start parameters",
+            "Ts = 0: the fit works on ln Ts and needs a positive start".into(),
+        ));
+    }
+    let max_step_s =
+        step_for(start.values()).ok_or_else(|| bad("start parameters", "not simulable".into()))?;
+    let mut problem = OeProblem::new(records, max_step_s)?;
+    for (k, (rec, p)) in problem.records.iter_mut().zip(priors).enumerate() {
+        if p.is_empty() {
+            continue;
+        }
+        let Input::Piecewise { times_s, volts } = &rec.input else {
+            return Err(bad(
+                format!("record {}", k + 1),
+                "level priors given for a voltage that is not piecewise constant".into(),
+            ));
+        };
+        if p.len() != volts.len() {
+            return Err(bad(
+                format!("record {}", k + 1),
+                format!("{} level priors for {} levels", p.len(), volts.len()),
+            ));
+        }
+        if p.iter().any(|q| {
+            !(q.volts_variance_v2.is_finite()
+                && q.volts_variance_v2 >= 0.0
+                && q.start_variance_s2.is_finite()
+                && q.start_variance_s2 >= 0.0)
+        }) {
+            return Err(bad(
+                format!("record {}", k + 1),
+                "level variances must be finite and ≥ 0".into(),
+            ));
+        }
+        rec.priors = volts
+            .iter()
+            .zip(times_s)
+            .zip(p)
+            .map(|((v, t), q)| (*v, *t, *q))
+            .collect();
+    }
+    fit_with_inputs(&mut problem, start, settings)
+}
+
+/// Relative step of the central difference in a level.
+const LEVEL_DIFF_STEP: f64 = 1e-5;
+/// Step of the central difference in a level's start, as a fraction of the sample period.
+const START_DIFF_STEP: f64 = 1e-2;
+
+impl OeProblem {
+    /// `(record, level, 0: value / 1: start)` of every uncertain input.
+    fn nuisance_slots(&self) -> Vec<(usize, usize, usize)> {
+        let mut out = Vec::new();
+        for (k, rec) in self.records.iter().enumerate() {
+            for (j, (_, _, p)) in rec.priors.iter().enumerate() {
+                if p.volts_variance_v2 > 0.0 {
+                    out.push((k, j, 0));
+                }
+                if p.start_variance_s2 > 0.0 {
+                    out.push((k, j, 1));
+                }
+            }
+        }
+        out
+    }
+}
+
+impl NuisanceProblem for OeProblem {
+    fn nuisances(&self) -> Vec<Nuisance> {
+        self.nuisance_slots()
+            .into_iter()
+            .filter_map(|(k, j, slot)| {
+                let rec = &self.records[k];
+                let Input::Piecewise { times_s, volts } = &rec.input else {
+                    return None;
+                };
+                let (v0, t0, p) = rec.priors[j];
+                Some(if slot == 0 {
+                    Nuisance {
+                        value: volts[j],
+                        prior_mean: v0,
+                        prior_variance: p.volts_variance_v2,
+                        step: LEVEL_DIFF_STEP * v0.abs().max(1e-3),
+                    }
+                } else {
+                    Nuisance {
+                        value: times_s[j],
+                        prior_mean: t0,
+                        prior_variance: p.start_variance_s2,
+                        step: START_DIFF_STEP * rec.dt,
+                    }
+                })
+            })
+            .collect()
+    }
+
+    fn set_nuisance(&mut self, j: usize, value: f64) {
+        if let Some(&(k, level, slot)) = self.nuisance_slots().get(j) {
+            let rec = &mut self.records[k];
+            let gap = 1e-9 * rec.dt;
+            let (_, start, prior) = rec.priors.get(level).copied().unwrap_or_default();
+            let half = (3.0 * prior.start_variance_s2).sqrt();
+            if let Input::Piecewise { times_s, volts } = &mut rec.input {
+                match slot {
+                    0 => volts[level] = value,
+                    // A start stays in the period its uniform prior spans (±√(3V)), and
+                    // may not pass its neighbours (nor 0).
+                    _ => {
+                        let lo = if level == 0 { 0.0 } else { times_s[level - 1] };
+                        let hi = times_s.get(level + 1).copied().unwrap_or(f64::INFINITY);
+                        times_s[level] = value
+                            .min(start + half)
+                            .max(start - half)
+                            .min(hi - gap)
+                            .max(lo + gap);
+                    }
+                }
+            }
+        }
+    }
+
+    fn linear_parts(&self, theta: &[f64]) -> Option<(Vec<f64>, DMatrix<f64>)> {
+        self.jacobian(theta)
+    }
+
+    fn residual_vector(&self, theta: &[f64]) -> Option<Vec<f64>> {
+        self.residuals(values_of(theta)?)
+    }
 }
 
 /// The RK4 step \[s\] for parameters `values`: the simulator's own (1/40 of the fastest time

@@ -60,10 +60,16 @@ fn degrees_of_freedom(normal: &NormalEquations) -> Option<usize> {
 /// `(JᵀJ)⁻¹`, inverted with column scaling `D (D JᵀJ D)⁻¹ D`, `D = diag(JᵀJ)^{-1/2}`, so that
 /// parameters of very different magnitudes do not ruin the conditioning.
 fn inverse_jtj(normal: &NormalEquations) -> Option<DMatrix<f64>> {
-    let p = normal.jtj.nrows();
+    scaled_inverse(&normal.jtj)
+}
+
+/// The inverse of a symmetric matrix `M` with a positive diagonal, as `D (D M D)⁻¹ D`,
+/// `D = diag(M)^{-1/2}` (quantities of very different magnitudes keep the conditioning).
+pub(crate) fn scaled_inverse(m: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+    let p = m.nrows();
     let d: Vec<f64> = (0..p)
         .map(|i| {
-            let v = normal.jtj[(i, i)];
+            let v = m[(i, i)];
             if v > 0.0 {
                 1.0 / v.sqrt()
             } else {
@@ -71,7 +77,7 @@ fn inverse_jtj(normal: &NormalEquations) -> Option<DMatrix<f64>> {
             }
         })
         .collect();
-    let scaled = DMatrix::from_fn(p, p, |i, j| normal.jtj[(i, j)] * d[i] * d[j]);
+    let scaled = DMatrix::from_fn(p, p, |i, j| m[(i, j)] * d[i] * d[j]);
     let inv = scaled.try_inverse()?;
     Some(DMatrix::from_fn(p, p, |i, j| inv[(i, j)] * d[i] * d[j]))
 }

@@ -1,6 +1,7 @@
 //! Finding the step in a record: the instant, the height and the uniform grid after it.
 
 use crate::error::FitError;
+use crate::input_uncertainty::{estimate_level, StepInputs, VoltageScale};
 
 /// Relative deviation from the median sample period tolerated before a record counts as not
 /// uniformly sampled.
@@ -11,18 +12,46 @@ const GRID_TOLERANCE: f64 = 1e-3;
 pub struct StepLocation {
     /// Index of the first sample at the new level.
     pub index: usize,
-    /// Step height E \[V\]: the mean voltage after the step.
+    /// Step height E \[V\]: the level of the voltage after the step ([`crate::estimate_level`]:
+    /// the mean, or the censored fit where the level sits at an ADC rail).
     pub volts: f64,
+    /// Variance of `volts` \[V²\] (noise, quantisation, rail).
+    pub volts_variance_v2: f64,
     /// Sample period \[s\].
     pub dt: f64,
     /// Time of the step \[s\] (the first sample at the new level).
     pub t_step: f64,
 }
 
+impl StepLocation {
+    /// What the location leaves unknown about the step: its height's variance, and its instant
+    /// anywhere in the sample period before the first sample at the new level.
+    pub fn inputs(&self) -> StepInputs {
+        StepInputs::sampled(
+            crate::LevelEstimate {
+                volts: self.volts,
+                variance_v2: self.volts_variance_v2,
+            },
+            self.dt,
+        )
+    }
+}
+
 /// Locates the voltage step: the first sample whose voltage passes half the median of the
 /// record's last half (pre-trigger samples at 0 V are allowed before it), and checks that the
-/// time column is strictly increasing and uniform.
+/// time column is strictly increasing and uniform. The voltage's ADC step is found from the
+/// column if it can be ([`VoltageScale::of`]); [`locate_step_with`] takes it from elsewhere.
 pub fn locate_step(t: &[f64], voltage: &[f64]) -> Result<StepLocation, FitError> {
+    locate_step_with(t, voltage, None)
+}
+
+/// [`locate_step`] with the voltage's ADC step `quantum_v` \[V\] if known (e.g. from the
+/// record's metadata): a noise-free quantised level is known only to ±½ step.
+pub fn locate_step_with(
+    t: &[f64],
+    voltage: &[f64],
+    quantum_v: Option<f64>,
+) -> Result<StepLocation, FitError> {
     let bad = |series: &str, reason: String| FitError::BadData {
         series: series.into(),
         reason,
@@ -52,13 +81,24 @@ pub fn locate_step(t: &[f64], voltage: &[f64]) -> Result<StepLocation, FitError>
         .position(|&v| v * level.signum() >= 0.5 * level.abs())
         .unwrap_or(0);
     // The mean, not the median: noise dithers the ADC's quantisation, so the mean of many
-    // samples is unbiased while the median sticks to one code (half an LSB off at worst).
+    // samples is unbiased (up to the bias estimate_level accounts for) while the median
+    // sticks to one code (half an LSB off at worst).
     let after = &voltage[index..];
-    let volts = after.iter().sum::<f64>() / after.len() as f64;
+    let scale = VoltageScale::of(voltage, quantum_v);
+    let level = estimate_level(after, &scale).ok_or_else(|| {
+        bad(
+            "voltage",
+            format!(
+                "{} samples after the step at sample {index}: too few, or not finite",
+                after.len()
+            ),
+        )
+    })?;
     let dt = uniform_period(t, index, "a step test")?;
     Ok(StepLocation {
         index,
-        volts,
+        volts: level.volts,
+        volts_variance_v2: level.variance_v2,
         dt,
         t_step: t[index],
     })

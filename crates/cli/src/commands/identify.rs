@@ -4,10 +4,11 @@ use std::path::Path;
 
 use anyhow::Result;
 use fit::{
-    electrical_equation, equation_error_start, fit_apparent_resistance, identify_full,
-    identify_inverse_model, identify_output_error, identify_paper, locate_step, steady_state_start,
-    voltage_input, ExcitedRecord, FullFit, InverseModelSettings, LmSettings, PaperIdentification,
-    StepTest, MECHANICAL_NAMES, PARAM_NAMES, PARAM_UNITS,
+    electrical_equation, equation_error_start, fit_apparent_resistance, identify_full_with_inputs,
+    identify_inverse_model, identify_output_error_with_inputs, identify_paper, locate_step_with,
+    steady_state_start, voltage_input, voltage_levels, ExcitedRecord, FullFit,
+    InverseModelSettings, LevelPrior, LmSettings, PaperIdentification, StepInputs, StepTest,
+    MECHANICAL_NAMES, PARAM_NAMES, PARAM_UNITS,
 };
 use motor_model::{central_difference, Derived, Input, MotorParams, Record};
 use serde_json::{json, Value};
@@ -34,6 +35,8 @@ pub struct LoadedStep {
     position: Option<Vec<f64>>,
     exclude_current: Option<Vec<bool>>,
     exclude_speed: Option<Vec<bool>>,
+    /// What the record leaves unknown about the step (height and instant).
+    pub inputs: StepInputs,
 }
 
 impl LoadedStep {
@@ -107,7 +110,8 @@ pub fn load_step(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedStep
     let loaded = read_loaded(path, map, true)?;
     let (exclude_current, exclude_speed) = check_clipping(&shown, &loaded, quiet)?;
     let label = file_lines(&shown, &loaded.lines);
-    let mut step = step_from_record(label, loaded.record)?;
+    let mut step = step_from_record_with(label, loaded.record, loaded.voltage_lsb)?;
+    step.inputs.current_lsb_a = loaded.current_lsb.unwrap_or(0.0);
     step.path = shown;
     let from = loaded.lines.len() - step.current.len();
     step.exclude_current = exclude_current.map(|m| m[from..].to_vec());
@@ -122,7 +126,18 @@ pub fn load_step(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedStep
 /// (for the paper method's Ωrm) comes from the `position` column ([`encoder_speed`]), else the
 /// `speed` column; the full fit uses the encoder angle where there is one.
 pub fn step_from_record(shown: String, cols: Record) -> Result<LoadedStep> {
-    let loc = locate_step(&cols.t, &cols.voltage).map_err(|e| BadInput(format!("{shown}: {e}")))?;
+    step_from_record_with(shown, cols, None)
+}
+
+/// [`step_from_record`] with the voltage's ADC step `voltage_lsb` \[V\] if known (a noise-free
+/// quantised step height is known only to ±½ step).
+pub fn step_from_record_with(
+    shown: String,
+    cols: Record,
+    voltage_lsb: Option<f64>,
+) -> Result<LoadedStep> {
+    let loc = locate_step_with(&cols.t, &cols.voltage, voltage_lsb)
+        .map_err(|e| BadInput(format!("{shown}: {e}")))?;
     let from = loc.index;
     // Eq. (1)-(2) with Coulomb friction opposing the motion are odd in (E, I, Ω, θ): a
     // negative step from rest is the mirror image of a positive one, and is fitted as such.
@@ -147,6 +162,7 @@ pub fn step_from_record(shown: String, cols: Record) -> Result<LoadedStep> {
         position: cols.position.as_deref().map(tail),
         exclude_current: None,
         exclude_speed: None,
+        inputs: loc.inputs(),
     })
 }
 
@@ -738,6 +754,8 @@ pub struct LoadedExcited {
     pub record: Record,
     /// The voltage waveform rebuilt from the voltage column, time from the first sample.
     pub input: Input,
+    /// What the record leaves unknown about each level of `input` (empty for a replayed one).
+    pub priors: Vec<LevelPrior>,
     dt: f64,
     exclude_current: Option<Vec<bool>>,
     exclude_speed: Option<Vec<bool>>,
@@ -772,8 +790,8 @@ pub fn load_excited(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedE
         ))
         .into());
     }
-    let input =
-        voltage_input(&rec.t, &rec.voltage).map_err(|e| BadInput(format!("{label}: {e}")))?;
+    let (input, priors) = voltage_levels(&rec.t, &rec.voltage, loaded.voltage_lsb)
+        .map_err(|e| BadInput(format!("{label}: {e}")))?;
     if input.peak_volts() == 0.0 {
         return Err(BadInput(format!(
             "{label}: the voltage is 0 V throughout: nothing drives the motor"
@@ -785,6 +803,7 @@ pub fn load_excited(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedE
         path: shown,
         label,
         input,
+        priors,
         dt,
         exclude_current,
         exclude_speed: if rec.position.is_some() {
@@ -820,7 +839,8 @@ pub fn fit_excited(
         None => equation_error_start(&records)
             .map_err(|e| BadInput(format!("{label}: {e}{start_hint}")))?,
     };
-    let full = identify_output_error(&records, &start, LmSettings::default())
+    let priors: Vec<Vec<LevelPrior>> = loaded.iter().map(|l| l.priors.clone()).collect();
+    let full = identify_output_error_with_inputs(&records, &priors, &start, LmSettings::default())
         .map_err(|e| BadInput(format!("{label}: {e}")))?;
     Ok((start, full))
 }
@@ -938,7 +958,7 @@ pub fn identify_pair(
                     .map_err(|e| BadInput(format!("{both}: {e}")))?,
             };
             Some(
-                identify_full(&tests, &start, settings)
+                identify_full_with_inputs(&tests, &[hv.inputs, lv.inputs], &start, settings)
                     .map_err(|e| BadInput(format!("{both}: {e}")))?,
             )
         }

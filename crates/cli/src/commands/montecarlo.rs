@@ -4,17 +4,21 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::Result;
-use fit::{identify_full, identify_paper, steady_state_start, LmSettings, PARAM_NAMES};
-use motor_model::{MeasurementModel, MotorParams, Record, StepResponse};
+use fit::{identify_full_with_inputs, identify_paper, steady_state_start, LmSettings, PARAM_NAMES};
+use motor_model::{MeasurementModel, MotorParams, NoiseRng, Record, StepResponse};
 use serde_json::json;
 
 use crate::args::{MeasurementArgs, MontecarloArgs, SpeedFromArg};
-use crate::commands::identify::{step_from_record, LoadedStep};
+use crate::commands::identify::{step_from_record_with, LoadedStep};
 use crate::settings;
 use crate::{BadInput, NotConverged};
 
 /// Most record pairs a study may ask for (200 take about 10 s on 2 cores; a million, a day).
 const MAX_RUNS: usize = 1_000_000;
+
+/// Largest stretch of the conditioning ranges with `--vary-range` (a fraction: more than one
+/// ADC step at full scale, so a level's place between codes is uniform over the runs).
+const RANGE_STRETCH: f64 = 0.05;
 
 /// Outcome of one record pair.
 struct Run {
@@ -38,6 +42,21 @@ pub fn measured_step(
     at_s: f64,
     seed: u64,
 ) -> Result<(Record, MeasurementModel)> {
+    measured_step_with(logger, None, 1.0, motor, volts, at_s, seed)
+}
+
+/// [`measured_step`] with `voltage_noise_lsb` \[LSB\] of noise on the voltage channel instead
+/// of the logger's `noise_lsb`, if given, and every conditioning range stretched by
+/// `range_scale` \[-\] (≥ 1: the signals sit elsewhere between the ADC's codes).
+pub fn measured_step_with(
+    logger: &Logger,
+    voltage_noise_lsb: Option<f64>,
+    range_scale: f64,
+    motor: &MotorParams,
+    volts: f64,
+    at_s: f64,
+    seed: u64,
+) -> Result<(Record, MeasurementModel)> {
     let trace = StepResponse::new(motor, volts)
         .trace(at_s, logger.duration_s, logger.rate_hz)
         .map_err(|e| BadInput(e.to_string()))?;
@@ -51,21 +70,77 @@ pub fn measured_step(
         speed_from: SpeedFromArg::Encoder,
         seed,
     };
-    let model = settings::measurement(&m, &trace)?;
+    let mut model = settings::measurement(&m, &trace)?;
+    if let Some(adc) = model.adc {
+        for c in 0..3 {
+            if let Some(r) = model.ranges[c] {
+                let stretched = motor_model::Range::new(r.lo * range_scale, r.hi * range_scale)
+                    .map_err(|e| BadInput(e.to_string()))?;
+                let lsb = match (c, voltage_noise_lsb) {
+                    (0, Some(v)) => v,
+                    _ => logger.noise_lsb,
+                };
+                model.ranges[c] = Some(stretched);
+                model.noise_std[c] = lsb * adc.lsb(stretched);
+            }
+        }
+    }
     let rec = model.apply(&trace).map_err(|e| BadInput(e.to_string()))?;
     Ok((rec, model))
 }
 
 /// A step of `volts` on `motor` recorded by `logger` with noise seed `seed`, located.
 pub fn record(logger: &Logger, motor: &MotorParams, volts: f64, seed: u64) -> Result<LoadedStep> {
-    let (rec, _) = measured_step(logger, motor, volts, 0.0, seed)?;
-    step_from_record(format!("simulated {volts} V record (seed {seed})"), rec)
+    record_at(logger, (None, 1.0), motor, volts, 0.0, seed)
+}
+
+/// A step of `volts` at `at_s` \[s\] on `motor` recorded by `logger` (with
+/// `voltage_noise_lsb` on the voltage if given, ranges stretched by `range_scale`) with noise
+/// seed `seed`, located.
+fn record_at(
+    logger: &Logger,
+    (voltage_noise_lsb, range_scale): (Option<f64>, f64),
+    motor: &MotorParams,
+    volts: f64,
+    at_s: f64,
+    seed: u64,
+) -> Result<LoadedStep> {
+    let (rec, model) = measured_step_with(
+        logger,
+        voltage_noise_lsb,
+        range_scale,
+        motor,
+        volts,
+        at_s,
+        seed,
+    )?;
+    let lsb = |c: usize| model.adc.zip(model.ranges[c]).map(|(adc, r)| adc.lsb(r));
+    let mut step = step_from_record_with(
+        format!("simulated {volts} V record (seed {seed})"),
+        rec,
+        lsb(0),
+    )?;
+    step.inputs.current_lsb_a = lsb(1).unwrap_or(0.0);
+    Ok(step)
+}
+
+/// How each run's motor and measurement vary (checked before the first run).
+struct Chain {
+    /// Noise on the voltage channel \[LSB\], if other than the logger's.
+    voltage_noise_lsb: Option<f64>,
+    /// Step instants drawn uniformly within a sample period.
+    subsample_step: bool,
+    /// Relative spread of each run's motor around the nominal one.
+    motor_spread: f64,
+    /// ADC ranges stretched at random (up to [`RANGE_STRETCH`]).
+    vary_range: bool,
 }
 
 /// The validated settings of a Monte Carlo study.
 struct Study {
     motor: MotorParams,
     logger: Logger,
+    chain: Chain,
     high_voltage_v: f64,
     low_voltage_v: f64,
     seed: u64,
@@ -73,9 +148,47 @@ struct Study {
 
 fn one_run(study: &Study, i: usize) -> Result<Run> {
     let seed = study.seed.wrapping_add(2 * i as u64);
-    let (logger, motor) = (&study.logger, &study.motor);
-    let hv = record(logger, motor, study.high_voltage_v, seed)?;
-    let lv = record(logger, motor, study.low_voltage_v, seed.wrapping_add(1))?;
+    let (a, nominal, logger) = (&study.chain, &study.motor, &study.logger);
+    // Run i's own motor and step instants (a generator apart from the noise's).
+    let mut rng = NoiseRng::new(seed ^ 0x5eed_5eed_5eed_5eed);
+    let spread = nominal
+        .values()
+        .map(|v| v * (1.0 + a.motor_spread * rng.normal()));
+    let motor = &MotorParams::from_values(spread)
+        .map_err(|e| BadInput(format!("run {i}: --motor-spread {}: {e}", a.motor_spread)))?;
+    let mut at = || {
+        if a.subsample_step {
+            rng.uniform() / logger.rate_hz
+        } else {
+            0.0
+        }
+    };
+    let (at_high, at_low) = (at(), at());
+    let mut chain = || {
+        let stretch = if a.vary_range {
+            1.0 + RANGE_STRETCH * rng.uniform()
+        } else {
+            1.0
+        };
+        (a.voltage_noise_lsb, stretch)
+    };
+    let (chain_high, chain_low) = (chain(), chain());
+    let hv = record_at(
+        logger,
+        chain_high,
+        motor,
+        study.high_voltage_v,
+        at_high,
+        seed,
+    )?;
+    let lv = record_at(
+        logger,
+        chain_low,
+        motor,
+        study.low_voltage_v,
+        at_low,
+        seed.wrapping_add(1),
+    )?;
     let tests = [hv.test(), lv.test()];
     let truth = motor.values();
     let rel = |p: &MotorParams| {
@@ -88,8 +201,13 @@ fn one_run(study: &Study, i: usize) -> Result<Run> {
         None => steady_state_start(&tests[0], &tests[1])
             .map_err(|e| BadInput(format!("run {i}: start: {e}")))?,
     };
-    let full = identify_full(&tests, &start, LmSettings::default())
-        .map_err(|e| BadInput(format!("run {i}: full method: {e}")))?;
+    let full = identify_full_with_inputs(
+        &tests,
+        &[hv.inputs, lv.inputs],
+        &start,
+        LmSettings::default(),
+    )
+    .map_err(|e| BadInput(format!("run {i}: full method: {e}")))?;
     Ok(Run {
         paper_error: paper.map(|p| rel(&p.params)),
         full_error: rel(&full.params),
@@ -137,6 +255,28 @@ pub fn run(a: &MontecarloArgs) -> Result<()> {
         )?,
         motor,
         logger,
+        chain: Chain {
+            voltage_noise_lsb: match a.voltage_noise_lsb {
+                Some(v) if !(v.is_finite() && v >= 0.0) => {
+                    return Err(BadInput(format!(
+                        "--voltage-noise-lsb {v}: expected a noise level of 0 LSB or more"
+                    ))
+                    .into())
+                }
+                other => other,
+            },
+            subsample_step: a.subsample_step,
+            motor_spread: if a.motor_spread.is_finite() && (0.0..0.5).contains(&a.motor_spread) {
+                a.motor_spread
+            } else {
+                return Err(BadInput(format!(
+                    "--motor-spread {}: expected a relative spread from 0 to 0.5",
+                    a.motor_spread
+                ))
+                .into());
+            },
+            vary_range: a.vary_range,
+        },
         seed: a.seed,
     };
     let threads = crate::parallel::threads(a.runs);

@@ -1,0 +1,563 @@
+//! What a record leaves unknown about the voltage it applied, and how that enters the intervals.
+//!
+//! The fits take each record's voltage levels and step instants as inputs, but those are
+//! themselves measured: a level is estimated from its quantised, noisy (or noise-free: then
+//! quantisation is a bias, not noise) voltage samples, and a step falls anywhere within the
+//! sample period before the first sample that shows it. Each such input `u_j` is a nuisance with
+//! an estimate `ū_j` and a variance `V_j` ([`LevelEstimate`], [`StepInputs`], [`LevelPrior`]).
+//!
+//! After the fit of `θ = ln p` at `u = ū`, the inputs are treated as parameters with a Gaussian
+//! prior: one joint Gauss–Newton step on `(θ, u)` with the prior rows `(u − ū)/√V` moves `u`
+//! where the records say it is (a sub-sample step instant is seen in the current's rise), `θ` is
+//! refitted there, and the covariance is the `θ` block of the joint problem,
+//! `Cov θ = Cov(θ | u) + G S Gᵀ` with `G = −(J_θᵀJ_θ)⁻¹ J_θᵀ J_u` (the implicit-function
+//! sensitivity of `θ̂` to `u`) and `S = (J_uᵀJ_u + V⁻¹ − J_uᵀJ_θ (J_θᵀJ_θ)⁻¹ J_θᵀJ_u)⁻¹` the
+//! posterior covariance of `u` (matrix inversion lemma on the joint normal matrix). `Cov(θ | u)`
+//! stays the Newey–West sandwich; `J_u` is by central differences of the weighted residuals.
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::error::FitError;
+use crate::full_model::{fit_weighted, FullFit, WeightedProblem};
+use crate::lm::LmSettings;
+use crate::stats::{scaled_inverse, student_t_quantile};
+
+/// Fraction of a level's samples at the column's extreme code above which that code is taken as
+/// an ADC rail (a Gaussian level away from a rail puts a vanishing fraction, about `1/n`, in its
+/// most extreme code).
+const RAIL_FRACTION: f64 = 0.01;
+/// A column is taken as quantised when it has at most this fraction of distinct values.
+const QUANTISED_DISTINCT_FRACTION: f64 = 0.25;
+/// Relative tolerance of "a multiple of the quantum" (values printed with finite digits).
+const QUANTUM_TOLERANCE: f64 = 1e-3;
+/// Joint Gauss–Newton passes on `(θ, u)` before the final covariance.
+const REFINE_PASSES: usize = 2;
+
+/// What a voltage column says about its ADC: the quantum (one LSB) and the extreme values.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VoltageScale {
+    /// One ADC step \[V\], if the column is quantised (given, or found from the column).
+    pub quantum_v: Option<f64>,
+    /// Smallest value of the column \[V\] (a rail, if samples pile up there).
+    pub min_v: f64,
+    /// Largest value of the column \[V\].
+    pub max_v: f64,
+}
+
+impl VoltageScale {
+    /// The scale of `voltage`: `quantum_v` if given (e.g. from a record's metadata), otherwise
+    /// the smallest gap between distinct values when at most a quarter of the samples are
+    /// distinct, there are at least three of them and every gap is a multiple of that smallest
+    /// one (a noise-free column with two values cannot show its quantum: give it).
+    pub fn of(voltage: &[f64], quantum_v: Option<f64>) -> Self {
+        let (min_v, max_v) = voltage
+            .iter()
+            .filter(|v| v.is_finite())
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+                (lo.min(v), hi.max(v))
+            });
+        let quantum_v = quantum_v
+            .filter(|q| q.is_finite() && *q > 0.0)
+            .or_else(|| detect_quantum(voltage));
+        VoltageScale {
+            quantum_v,
+            min_v,
+            max_v,
+        }
+    }
+}
+
+fn detect_quantum(values: &[f64]) -> Option<f64> {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    v.sort_by(f64::total_cmp);
+    v.dedup();
+    if v.len() < 3 || v.len() as f64 > QUANTISED_DISTINCT_FRACTION * values.len() as f64 {
+        return None;
+    }
+    let gaps: Vec<f64> = v.windows(2).map(|w| w[1] - w[0]).collect();
+    let q = gaps.iter().copied().fold(f64::INFINITY, f64::min);
+    (q > 0.0
+        && gaps
+            .iter()
+            .all(|g| ((g / q) - (g / q).round()).abs() < QUANTUM_TOLERANCE * (g / q).max(1.0)))
+    .then_some(q)
+}
+
+/// A voltage level estimated from its samples, with the variance of the estimate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LevelEstimate {
+    /// The level \[V\].
+    pub volts: f64,
+    /// Variance of `volts` \[V²\]: from the noise (`s²/n`), the quantisation bias, or the
+    /// censored fit at a rail.
+    pub variance_v2: f64,
+}
+
+/// The level of `samples` (one constant voltage) recorded on `scale`.
+///
+/// - Unquantised: the mean, variance `s²/n` (white noise).
+/// - Quantised with quantum `Δ`: the mean, whose error is the noise's `s²/n` plus the
+///   quantiser's bias `e(μ) = E[Q(μ + n)] − μ`. For Gaussian noise σ, `e` is periodic in the
+///   level μ, `e(μ) = Σₖ (−1)^{k+1} Δ/(πk) exp(−2π²k²σ²/Δ²) sin(2πkμ/Δ)`; with the level's
+///   place between codes unknown (uniform), its variance is
+///   `Σₖ Δ²/(2π²k²) exp(−4π²k²σ²/Δ²)` — `Δ²/12` without noise, negligible beyond σ ≈ Δ.
+///   σ is estimated as `√max(s² − Δ²/12, 0)` (too small, hence a larger bias term, when σ < Δ/2).
+/// - At a rail (the level's lowest or highest code is the column's extreme and holds more than
+///   1 % of its samples, with at least three codes seen): noise is clipped there, so the mean
+///   is biased; the level and σ are the maximum-likelihood fit of a Gaussian quantised into
+///   the codes seen, the rail code standing for everything beyond it; the variance is the
+///   inverse observed information.
+///
+/// `None` for fewer than two samples or non-finite values.
+pub fn estimate_level(samples: &[f64], scale: &VoltageScale) -> Option<LevelEstimate> {
+    let n = samples.len();
+    if n < 2 || samples.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let nf = n as f64;
+    let mean = samples.iter().sum::<f64>() / nf;
+    let s2 = samples.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (nf - 1.0);
+    let Some(q) = scale.quantum_v else {
+        return Some(LevelEstimate {
+            volts: mean,
+            variance_v2: s2 / nf,
+        });
+    };
+    let (lo, hi) = samples
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    let codes: Vec<i64> = samples
+        .iter()
+        .map(|v| ((v - lo) / q).round() as i64)
+        .collect();
+    let top = ((hi - lo) / q).round() as usize;
+    let mut counts = vec![0.0; top + 1];
+    for &c in &codes {
+        if let Some(slot) = usize::try_from(c).ok().and_then(|c| counts.get_mut(c)) {
+            *slot += 1.0;
+        }
+    }
+    let at = |v: f64, rail: f64| (v - rail).abs() < 0.25 * q;
+    let seen = counts.iter().filter(|&&c| c > 0.0).count();
+    let first = counts.first().copied().unwrap_or(0.0);
+    let last = counts.last().copied().unwrap_or(0.0);
+    let low_rail = at(lo, scale.min_v) && first > RAIL_FRACTION * nf;
+    let high_rail = at(hi, scale.max_v) && last > RAIL_FRACTION * nf;
+    if (low_rail || high_rail) && seen >= 3 {
+        if let Some((mu, var)) = censored_fit(&counts, low_rail, high_rail) {
+            return Some(LevelEstimate {
+                volts: lo + mu * q,
+                variance_v2: var * q * q,
+            });
+        }
+    }
+    let sigma2 = (s2 - q * q / 12.0).max(0.0);
+    Some(LevelEstimate {
+        volts: mean,
+        variance_v2: s2 / nf + quantisation_bias_variance(sigma2.sqrt(), q),
+    })
+}
+
+/// Variance over the level's unknown place between codes of a quantiser's bias with Gaussian
+/// noise `sigma` and quantum `q` (same unit): `Σₖ q²/(2π²k²) exp(−4π²k²σ²/q²)`, `q²/12` at σ = 0.
+pub fn quantisation_bias_variance(sigma: f64, q: f64) -> f64 {
+    use std::f64::consts::PI;
+    if sigma <= 0.0 {
+        return q * q / 12.0;
+    }
+    let a = 4.0 * PI * PI * sigma * sigma / (q * q);
+    let mut total = 0.0;
+    for k in 1..=10_000u32 {
+        let k2 = f64::from(k) * f64::from(k);
+        let term = q * q / (2.0 * PI * PI * k2) * (-a * k2).exp();
+        total += term;
+        if term < 1e-14 * total {
+            break;
+        }
+    }
+    total
+}
+
+/// Standard normal distribution function.
+fn phi(x: f64) -> f64 {
+    0.5 * libm::erfc(-x / std::f64::consts::SQRT_2)
+}
+
+/// Maximum-likelihood level `μ` and its variance (in codes, code 0 = the lowest seen) of a
+/// Gaussian quantised into `counts`, the lowest (highest) code censored when it is a rail.
+fn censored_fit(counts: &[f64], low_rail: bool, high_rail: bool) -> Option<(f64, f64)> {
+    let top = counts.len() - 1;
+    let nll = |mu: f64, ln_sigma: f64| -> f64 {
+        let s = ln_sigma.exp();
+        let mut total = 0.0;
+        for (k, &c) in counts.iter().enumerate() {
+            if c == 0.0 {
+                continue;
+            }
+            let kf = k as f64;
+            let upper = if high_rail && k == top {
+                1.0
+            } else {
+                phi((kf + 0.5 - mu) / s)
+            };
+            let lower = if low_rail && k == 0 {
+                0.0
+            } else {
+                phi((kf - 0.5 - mu) / s)
+            };
+            let p = (upper - lower).max(1e-300);
+            total -= c * p.ln();
+        }
+        total
+    };
+    let n: f64 = counts.iter().sum();
+    let mean = counts
+        .iter()
+        .enumerate()
+        .map(|(k, c)| k as f64 * c)
+        .sum::<f64>()
+        / n;
+    let var = counts
+        .iter()
+        .enumerate()
+        .map(|(k, c)| (k as f64 - mean).powi(2) * c)
+        .sum::<f64>()
+        / n;
+    let mut x = [mean, var.sqrt().max(0.3).ln()];
+    let h = 1e-4;
+    let hessian_at = |x: [f64; 2]| -> ([f64; 2], [[f64; 2]; 2]) {
+        let f = |a: f64, b: f64| nll(a, b);
+        let f0 = f(x[0], x[1]);
+        let g = [
+            (f(x[0] + h, x[1]) - f(x[0] - h, x[1])) / (2.0 * h),
+            (f(x[0], x[1] + h) - f(x[0], x[1] - h)) / (2.0 * h),
+        ];
+        let haa = (f(x[0] + h, x[1]) - 2.0 * f0 + f(x[0] - h, x[1])) / (h * h);
+        let hbb = (f(x[0], x[1] + h) - 2.0 * f0 + f(x[0], x[1] - h)) / (h * h);
+        let hab = (f(x[0] + h, x[1] + h) - f(x[0] + h, x[1] - h) - f(x[0] - h, x[1] + h)
+            + f(x[0] - h, x[1] - h))
+            / (4.0 * h * h);
+        (g, [[haa, hab], [hab, hbb]])
+    };
+    for _ in 0..200 {
+        let (g, hm) = hessian_at(x);
+        let det = hm[0][0] * hm[1][1] - hm[0][1] * hm[0][1];
+        let mut step = if hm[0][0] > 0.0 && det > 0.0 {
+            [
+                -(hm[1][1] * g[0] - hm[0][1] * g[1]) / det,
+                -(hm[0][0] * g[1] - hm[0][1] * g[0]) / det,
+            ]
+        } else {
+            [-0.01 * g[0] / n, -0.01 * g[1] / n]
+        };
+        let f0 = nll(x[0], x[1]);
+        let mut accepted = false;
+        for _ in 0..40 {
+            let trial = [x[0] + step[0], (x[1] + step[1]).clamp(-6.0, 6.0)];
+            if nll(trial[0], trial[1]) <= f0 {
+                x = trial;
+                accepted = true;
+                break;
+            }
+            step = [0.5 * step[0], 0.5 * step[1]];
+        }
+        if !accepted || step[0].abs().max(step[1].abs()) < 1e-10 {
+            break;
+        }
+    }
+    let (_, hm) = hessian_at(x);
+    let det = hm[0][0] * hm[1][1] - hm[0][1] * hm[0][1];
+    let var_mu = hm[1][1] / det;
+    (x[0].is_finite() && var_mu.is_finite() && var_mu > 0.0 && det > 0.0).then_some((x[0], var_mu))
+}
+
+/// What one step test leaves unknown about its input (see [`crate::identify_full_with_inputs`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct StepInputs {
+    /// Variance of the step height \[V²\] ([`LevelEstimate::variance_v2`]).
+    pub volts_variance_v2: f64,
+    /// Expected time from the step instant to the test's first sample \[s\], added to its
+    /// `t_first`: `dt/2` for a step that falls anywhere in the sample period before the first
+    /// sample at the new level.
+    pub delay_s: f64,
+    /// Variance of that time \[s²\]: `dt²/12` for a uniform place in the period.
+    pub delay_variance_s2: f64,
+    /// One ADC step of the current channel \[A\], or 0 if unknown or unquantised. A current
+    /// that settles within one step reads one code (or a few, with little noise) for the rest
+    /// of the record: its quantisation error is then a constant offset the parameters absorb
+    /// and the residuals cannot show, so it enters as an input of variance
+    /// [`quantisation_bias_variance`].
+    pub current_lsb_a: f64,
+}
+
+impl StepInputs {
+    /// A step of `level` sampled every `dt_s` \[s\], its instant anywhere in the period before
+    /// its first sample.
+    pub fn sampled(level: LevelEstimate, dt_s: f64) -> Self {
+        StepInputs {
+            volts_variance_v2: level.variance_v2,
+            delay_s: 0.5 * dt_s,
+            delay_variance_s2: dt_s * dt_s / 12.0,
+            current_lsb_a: 0.0,
+        }
+    }
+}
+
+/// The samples at the end of `current` that stay within one ADC step `lsb` of the final level
+/// (the mean of the last 5 %), as the index of the first, with the variance of their common
+/// quantisation offset; `None` when that variance is negligible (noise of a step or more
+/// dithers the quantiser) or nothing settles.
+pub(crate) fn settled_current(current: &[f64], lsb: f64) -> Option<(usize, f64)> {
+    if !(lsb > 0.0 && lsb.is_finite()) || current.len() < 20 {
+        return None;
+    }
+    let tail = &current[current.len() - current.len() / 20..];
+    let end = tail.iter().sum::<f64>() / tail.len() as f64;
+    let from = current
+        .iter()
+        .rposition(|y| (y - end).abs() > lsb)
+        .map_or(0, |i| i + 1);
+    let settled = current.get(from..).filter(|s| s.len() >= 2)?;
+    let n = settled.len() as f64;
+    let mean = settled.iter().sum::<f64>() / n;
+    let s2 = settled.iter().map(|y| (y - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    let sigma = (s2 - lsb * lsb / 12.0).max(0.0).sqrt();
+    let variance = quantisation_bias_variance(sigma, lsb);
+    (variance > 1e-6 * lsb * lsb).then_some((from, variance))
+}
+
+/// What a record leaves unknown about one level of its piecewise-constant voltage
+/// (see [`crate::voltage_levels`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LevelPrior {
+    /// Variance of the level \[V²\].
+    pub volts_variance_v2: f64,
+    /// Variance of the instant the level starts \[s²\] (0 for a level that starts the record).
+    pub start_variance_s2: f64,
+}
+
+/// One nuisance input of a problem: where it is now, its prior, and a difference step.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Nuisance {
+    /// Current value (unit of the input).
+    pub value: f64,
+    /// Prior estimate.
+    pub prior_mean: f64,
+    /// Prior variance (> 0).
+    pub prior_variance: f64,
+    /// Step of the central difference.
+    pub step: f64,
+}
+
+/// A weighted problem whose residuals also depend on uncertain inputs.
+pub(crate) trait NuisanceProblem: WeightedProblem {
+    /// The uncertain inputs (those with a positive variance), in a fixed order.
+    fn nuisances(&self) -> Vec<Nuisance>;
+    /// Sets input `j` (in the order of [`Self::nuisances`]) to `value`.
+    fn set_nuisance(&mut self, j: usize, value: f64);
+    /// The weighted residuals at `theta` and their Jacobian in θ (n × 6); fixes whatever
+    /// discretisation the residuals at other inputs must share.
+    fn linear_parts(&self, theta: &[f64]) -> Option<(Vec<f64>, DMatrix<f64>)>;
+    /// The weighted residuals at `theta`, on the discretisation of the last
+    /// [`Self::linear_parts`].
+    fn residual_vector(&self, theta: &[f64]) -> Option<Vec<f64>>;
+}
+
+/// The joint linearisation at one point.
+struct Joint {
+    /// Number of residuals.
+    n: usize,
+    /// `G = −(J_θᵀJ_θ)⁻¹ J_θᵀJ_u`.
+    g: DMatrix<f64>,
+    /// Posterior covariance of `u`.
+    s: DMatrix<f64>,
+    /// Joint Gauss–Newton step on `(θ, u)`.
+    step: DVector<f64>,
+}
+
+fn linearise<P: NuisanceProblem>(problem: &mut P, theta: &[f64]) -> Option<Joint> {
+    let nuisances = problem.nuisances();
+    let m = nuisances.len();
+    let (r0, jt) = problem.linear_parts(theta)?;
+    let n = r0.len();
+    let mut ju = DMatrix::zeros(n, m);
+    for (j, u) in nuisances.iter().enumerate() {
+        problem.set_nuisance(j, u.value + u.step);
+        let plus = problem.residual_vector(theta);
+        problem.set_nuisance(j, u.value - u.step);
+        let minus = problem.residual_vector(theta);
+        problem.set_nuisance(j, u.value);
+        let (plus, minus) = (plus?, minus?);
+        if plus.len() != n || minus.len() != n {
+            return None;
+        }
+        for i in 0..n {
+            ju[(i, j)] = (plus[i] - minus[i]) / (2.0 * u.step);
+        }
+    }
+    let r = DVector::from_vec(r0);
+    let a = jt.tr_mul(&jt);
+    let b = jt.tr_mul(&ju);
+    let prior_info = DMatrix::from_fn(m, m, |i, j| {
+        if i == j {
+            1.0 / nuisances[i].prior_variance
+        } else {
+            0.0
+        }
+    });
+    let d = ju.tr_mul(&ju) + &prior_info;
+    let a_inv = scaled_inverse(&a)?;
+    let g = -(&a_inv * &b);
+    let schur = &d + b.transpose() * &g;
+    let s = scaled_inverse(&schur)?;
+    // The joint normal equations [[A, B], [Bᵀ, D]] (δθ, δu) = −(J_θᵀr, J_uᵀr + V⁻¹(u − ū)).
+    let mut h = DMatrix::zeros(6 + m, 6 + m);
+    h.view_mut((0, 0), (6, 6)).copy_from(&a);
+    h.view_mut((0, 6), (6, m)).copy_from(&b);
+    h.view_mut((6, 0), (m, 6)).copy_from(&b.transpose());
+    h.view_mut((6, 6), (m, m)).copy_from(&d);
+    let mut grad = DVector::zeros(6 + m);
+    grad.rows_mut(0, 6).copy_from(&jt.tr_mul(&r));
+    let offset = DVector::from_fn(m, |j, _| {
+        (nuisances[j].value - nuisances[j].prior_mean) / nuisances[j].prior_variance
+    });
+    grad.rows_mut(6, m).copy_from(&(ju.tr_mul(&r) + offset));
+    let step = -(scaled_inverse(&h)? * grad);
+    step.iter()
+        .all(|v| v.is_finite())
+        .then_some(Joint { n, g, s, step })
+}
+
+/// Fits `problem` as [`fit_weighted`] does, then moves its uncertain inputs where the records
+/// put them (joint Gauss–Newton with their prior), refits, and widens the intervals by the
+/// inputs' posterior uncertainty (see the module documentation).
+pub(crate) fn fit_with_inputs<P: NuisanceProblem>(
+    problem: &mut P,
+    start: &motor_model::MotorParams,
+    settings: LmSettings,
+) -> Result<FullFit, FitError> {
+    let mut fit = fit_weighted(problem, start, settings)?;
+    if problem.nuisances().is_empty() {
+        return Ok(fit);
+    }
+    let mut iterations = fit.iterations;
+    for _ in 0..REFINE_PASSES {
+        if !fit.termination.converged() {
+            return Ok(fit);
+        }
+        let theta = ln_values(&fit);
+        let Some(joint) = linearise(problem, &theta) else {
+            return Ok(fit);
+        };
+        let nuisances = problem.nuisances();
+        let m = nuisances.len();
+        let du = joint.step.rows(6, m);
+        let small = nuisances
+            .iter()
+            .zip(du.iter())
+            .all(|(u, d)| d.abs() < 1e-3 * u.prior_variance.sqrt());
+        if small {
+            break;
+        }
+        for (j, u) in nuisances.iter().enumerate() {
+            problem.set_nuisance(j, u.value + du[j]);
+        }
+        let moved: Vec<f64> = theta
+            .iter()
+            .zip(joint.step.rows(0, 6).iter())
+            .map(|(t, d)| (t + d).exp())
+            .collect();
+        let restart = motor_model::MotorParams::from_values(std::array::from_fn(|i| moved[i]))
+            .unwrap_or(fit.params);
+        let refit = fit_weighted(problem, &restart, settings)?;
+        iterations += refit.iterations;
+        fit = refit;
+    }
+    fit.iterations = iterations;
+    let theta = ln_values(&fit);
+    if let (Some(joint), Some(se), Some(corr)) = (
+        linearise(problem, &theta),
+        fit.std_error,
+        fit.correlation.clone(),
+    ) {
+        let values = fit.params.values();
+        let sd: Vec<f64> = (0..6).map(|i| se[i] / values[i]).collect();
+        let conditional = DMatrix::from_fn(6, 6, |i, j| corr[(i, j)] * sd[i] * sd[j]);
+        let added = &joint.g * &joint.s * joint.g.transpose();
+        let cov = conditional + added;
+        let n = joint.n.saturating_sub(6);
+        let t = student_t_quantile(0.975, n.max(1) as f64);
+        let sd_new: Vec<f64> = (0..6).map(|i| cov[(i, i)].max(0.0).sqrt()).collect();
+        if sd_new.iter().all(|s| s.is_finite()) {
+            fit.std_error = Some(std::array::from_fn(|i| values[i] * sd_new[i]));
+            fit.ci95 = Some(std::array::from_fn(|i| {
+                let half = t * values[i] * sd_new[i];
+                [values[i] - half, values[i] + half]
+            }));
+            fit.correlation = Some(DMatrix::from_fn(6, 6, |i, j| {
+                let den = sd_new[i] * sd_new[j];
+                if den > 0.0 {
+                    cov[(i, j)] / den
+                } else if i == j {
+                    1.0
+                } else {
+                    0.0
+                }
+            }));
+        }
+    }
+    Ok(fit)
+}
+
+fn ln_values(fit: &FullFit) -> Vec<f64> {
+    fit.params.values().iter().map(|v| v.ln()).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn quantise(x: f64, q: f64, lo: f64) -> f64 {
+        lo + ((x - lo) / q).round().max(0.0) * q
+    }
+
+    #[test]
+    fn noise_free_level_gets_the_uniform_quantisation_variance() {
+        let q = 0.05;
+        let v = vec![quantise(40.012, q, 0.0); 1000];
+        let scale = VoltageScale::of(&v, Some(q));
+        let e = estimate_level(&v, &scale).unwrap();
+        assert!((e.variance_v2 - q * q / 12.0).abs() < 1e-15);
+        assert!((e.volts - 40.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn bias_variance_falls_from_q2_over_12_with_noise() {
+        let q = 1.0;
+        assert!((quantisation_bias_variance(1e-9, q) - 1.0 / 12.0).abs() < 1e-4);
+        assert!(quantisation_bias_variance(0.5, q) < 1e-5);
+        assert!(quantisation_bias_variance(0.25, q) > 1e-3);
+    }
+
+    #[test]
+    fn level_at_a_rail_is_not_biased_by_the_clipped_noise() {
+        // 0 V read on a 0-rail ADC with 1 LSB of noise: the mean reads about +0.29 LSB.
+        let q = 0.05;
+        let mut rng = motor_model::NoiseRng::new(7);
+        let mut v: Vec<f64> = (0..20_000)
+            .map(|_| quantise(q * rng.normal(), q, 0.0))
+            .collect();
+        v.push(40.0);
+        let scale = VoltageScale::of(&v, None);
+        assert!((scale.quantum_v.unwrap() - q).abs() < 1e-12);
+        v.pop();
+        let mean = v.iter().sum::<f64>() / v.len() as f64;
+        assert!(mean > 0.2 * q, "mean {mean}");
+        let e = estimate_level(&v, &scale).unwrap();
+        let sd = e.variance_v2.sqrt();
+        assert!(e.volts.abs() < 3.0 * sd, "{} ± {sd}", e.volts);
+        assert!(sd < 0.05 * q);
+    }
+}
