@@ -223,3 +223,17 @@ fn short_records_are_named_as_too_short() {
     }
     common::assert_bad_input(&["identify", "--record", h], "too little motion");
 }
+
+#[test]
+fn a_return_to_zero_volts_on_a_unipolar_adc_is_read_at_its_rail() {
+    // The noise clipped at the 0 V rail read the level as 0.0178 V; R, k, f, J and Ts missed
+    // in 3 of 3 seeds.
+    let dir = scratch("rail_level");
+    let path = dir.join("rec.csv");
+    let mut args = LOGGER.to_vec();
+    args.extend_from_slice(&["--levels", "0.5:40,100.5:0", "--duration", "150"]);
+    simulate_to(&path, &args);
+    let (v, out) = json_of(&["identify", "--record", path.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert_truth_in_intervals(&v, &TRUTH);
+}
