@@ -508,6 +508,13 @@ pub(crate) fn fit_with_inputs<P: NuisanceProblem>(
             }));
         }
     }
+    // The widened intervals are the ones reported: judge the result on them.
+    fit.refusal = crate::plausibility::assess(
+        &fit.params,
+        fit.ci95.as_ref(),
+        &fit.quality,
+        &problem.facts(),
+    );
     Ok(fit)
 }
 
