@@ -477,10 +477,12 @@ const MAX_PLAIN_PERIOD_S: f64 = 0.01;
 /// motor draws 2.1 kW at its 40 V step).
 const MAX_PLAIN_POWER_W: f64 = 1e5;
 /// A peak voltage over peak current below this \[Ω\] on a `current` column without a unit is
-/// taken for a current in mA too: a servomotor's armature is tenths of an ohm to tens of ohms
-/// (the paper's, 0.3 Ω, peaks at 40 V / 53.6 A = 0.75 Ω), and the same motor in mA reads a
-/// thousand times less.
-const MIN_PLAIN_OHM: f64 = 0.02;
+/// taken for a current in mA too. A step from rest never draws more than its stall current E/R,
+/// so this apparent resistance is at least R: a servomotor's armature is tenths of an ohm to
+/// tens of ohms (the paper's, 0.3 Ω, peaks at 40 V / 53.6 A = 0.75 Ω), and the same motor in mA
+/// reads a thousand times less. (A motor whose current stays far below its stall current
+/// reads, in mA, like a stronger motor in A: no threshold tells those apart; the unit does.)
+const MIN_PLAIN_OHM: f64 = 0.05;
 
 /// Refuses a record whose unit-less `t` or `current` column is implausible in SI units (a time
 /// in ms, a current in mA): the fit would converge to a motor scaled by 1000 in every

@@ -36,10 +36,12 @@ use crate::step_location::uniform_period;
 const FD_STEP: f64 = 1e-6;
 /// Fraction of the start's own RK4 step used for the whole fit (room for faster parameters).
 const STEP_MARGIN: f64 = 0.5;
-/// Most RK4 steps per record sample a simulation may take (a time constant 12.5 times below
+/// Most RK4 steps per record sample a simulation may take (a time constant 2.5 times below
 /// the sample period: 1/40 of it per step, with [`STEP_MARGIN`]); faster time constants are
 /// outside what the records show.
-const MAX_STEPS_PER_SAMPLE: f64 = 1000.0;
+// A record sampled fifty times slower than τe took minutes a fit at 1000 steps a sample, for
+// an L that its current, settled at every sample, cannot show.
+const MAX_STEPS_PER_SAMPLE: f64 = 200.0;
 /// A voltage is piecewise constant when it has at most one jump per this many samples.
 const MIN_SAMPLES_PER_LEVEL: usize = 20;
 
@@ -511,7 +513,7 @@ pub fn identify_output_error(
     problem.set_step_for(start.values()).ok_or_else(|| {
         bad(
             "start parameters",
-            "a time constant (L/R or the mechanical one) more than 12.5 times below the sample period: \
+            "a time constant (L/R or the mechanical one) more than 2.5 times below the sample period: \
              the records cannot show it; give a start that matches them"
                 .into(),
         )
