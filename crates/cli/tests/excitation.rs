@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{motorid, scratch, stderr, stdout, LOGGER, PAPER_TRUTH as TRUTH};
+use common::{motorid, scratch, simulate_to, stderr, stdout, LOGGER, PAPER_TRUTH as TRUTH};
 
 /// Every parameter of the JSON report contains the paper motor's value in its 95 % interval.
 fn assert_within_intervals(json: &str) {
@@ -162,22 +162,9 @@ fn batch_identifies_a_fleet_and_reports_broken_folders() {
     // output-error start loop for ever and stalled the whole batch.
     let single = fleet.join("motor_hv");
     std::fs::create_dir_all(&single).unwrap();
-    let out = motorid(&[
-        "simulate",
-        "--voltage",
-        "40",
-        "--adc-bits",
-        "10",
-        "--noise-lsb",
-        "1",
-        "--encoder-cpr",
-        "2000",
-        "--speed-from",
-        "encoder",
-        "-o",
-        single.join("hv.csv").to_str().unwrap(),
-    ]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    let mut args = LOGGER.to_vec();
+    args.extend_from_slice(&["--voltage", "40"]);
+    simulate_to(&single.join("hv.csv"), &args);
     let out = motorid(&["identify", "--batch", fleet.to_str().unwrap(), "-q"]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     let text = stdout(&out);
