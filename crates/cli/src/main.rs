@@ -9,7 +9,6 @@
 
 mod args;
 mod commands;
-mod daq_client;
 mod output;
 mod paper_values;
 mod parallel;

@@ -6,17 +6,14 @@
 
 use daq_protocol::{
     encode, kind, pack_sample, packed_len, Command, Decoder, ErrorCode, Frame, Mode, Reply, Sample,
-    State, ADC_MAX, ALL_CHANNELS, ENCODER_MODULUS, MAX_BLOCK_SAMPLES, MAX_FRAME,
+    State, ADC_MAX, ALL_CHANNELS, ENCODER_MODULUS, MAX_BLOCK_SAMPLES, MAX_FRAME, MAX_RATE_HZ,
+    SAMPLE_BYTES,
 };
 
 use crate::hw::{Adc, Drive, Encoder, Flash, Timer, Uart};
 
-/// Bytes a stored sample takes in flash (42 bits, padded).
-pub const SAMPLE_BYTES: u32 = 6;
 /// Longest command frame on the line (Arm: 2 + 9 + 4 bytes of body, stuffed, delimited).
 pub const MAX_COMMAND_FRAME: usize = 17;
-/// Highest sample rate accepted \[Hz\].
-pub const MAX_RATE_HZ: u16 = 10_000;
 
 /// Every peripheral the firmware drives.
 pub trait Board: Adc + Encoder + Drive + Flash + Uart + Timer {}

@@ -12,77 +12,12 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use motor_model::{
-    Adc as AdcModel, Effects, Input, MeasurementModel, ModelError, MotorParams, Range, Readings,
-};
-use serde::{Deserialize, Serialize};
+use motor_model::{Effects, Input, ModelError, MotorParams, Readings};
 
 use crate::firmware::Firmware;
 use crate::hw::{Adc, Drive, Encoder, Flash, Timer, Uart};
 use crate::FLASH_BYTES;
-
-/// How the logger's readings map to SI units: the physical value at 0 V and at 5 V of each
-/// conditioned analog channel (ADC codes 0 and 1023), and the encoder's counts per revolution.
-/// The file format of `motorid acquire --calibration FILE.json`:
-/// `{"voltage": [-50, 50], "current": [-200, 200], "speed": [-250, 250], "counts_per_rev": 2000}`
-/// (V, A, rad/s; the defaults, which the emulator uses).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Calibration {
-    /// Armature voltage at 0 V and 5 V \[V\].
-    pub voltage: [f64; 2],
-    /// Armature current at 0 V and 5 V \[A\].
-    pub current: [f64; 2],
-    /// Tachometer speed at 0 V and 5 V \[rad/s\].
-    pub speed: [f64; 2],
-    /// Encoder counts per revolution (after quadrature decoding).
-    pub counts_per_rev: u32,
-}
-
-impl Default for Calibration {
-    fn default() -> Self {
-        Calibration {
-            voltage: [-50.0, 50.0],
-            current: [-200.0, 200.0],
-            speed: [-250.0, 250.0],
-            counts_per_rev: 2000,
-        }
-    }
-}
-
-impl Calibration {
-    /// The three analog ranges, validated.
-    pub fn ranges(&self) -> Result<[Range; 3], ModelError> {
-        Ok([
-            Range::new(self.voltage[0], self.voltage[1])?,
-            Range::new(self.current[0], self.current[1])?,
-            Range::new(self.speed[0], self.speed[1])?,
-        ])
-    }
-
-    /// The value \[SI\] of ADC `code` on `channel` (0 voltage, 1 current, 2 speed).
-    pub fn analog(&self, channel: usize, code: u16) -> f64 {
-        let r = [self.voltage, self.current, self.speed][channel.min(2)];
-        AdcModel { bits: 10 }.to_value(Range { lo: r[0], hi: r[1] }, u32::from(code))
-    }
-
-    /// The angle \[rad\] of an unwrapped encoder count.
-    pub fn angle(&self, count: i64) -> f64 {
-        count as f64 * (std::f64::consts::TAU / f64::from(self.counts_per_rev))
-    }
-
-    /// The measurement chain of this calibration with `noise_lsb` of ADC noise and `seed`: the
-    /// settings under which `motorid simulate` gives the logger's records.
-    pub fn measurement(&self, noise_lsb: f64, seed: u64) -> Result<MeasurementModel, ModelError> {
-        Ok(MeasurementModel::logger(
-            10,
-            self.ranges()?,
-            noise_lsb,
-            self.counts_per_rev,
-            seed,
-        ))
-    }
-}
+use daq_protocol::host::Calibration;
 
 /// What the emulated logger is connected to.
 #[derive(Debug, Clone, PartialEq)]

@@ -18,13 +18,11 @@ mod firmware;
 pub mod host;
 pub mod hw;
 
-pub use daq_protocol::{ADC_BITS, BAUD, ENCODER_BITS};
-pub use firmware::{Board, Firmware, MAX_COMMAND_FRAME, MAX_RATE_HZ, SAMPLE_BYTES};
+pub use daq_protocol::{ADC_BITS, BAUD, ENCODER_BITS, FLASH_BYTES, MAX_RATE_HZ, SAMPLE_BYTES};
+pub use firmware::{Board, Firmware, MAX_COMMAND_FRAME};
 
 /// RAM of the PIC 16F877, in bytes: the budget of the firmware core's state.
 pub const PIC_RAM_BYTES: usize = 368;
-/// The flash of the paper's logger: 16 Mbit \[bytes\].
-pub const FLASH_BYTES: u32 = 16 * 1024 * 1024 / 8;
 
 #[cfg(test)]
 extern crate std;

@@ -19,11 +19,20 @@
 //!   with [`Command::Dump`];
 //! - samples are packed at their real widths: 10 bits per ADC channel and 12 for the wrapping
 //!   encoder counter, little-endian bit order ([`pack_sample`], [`unpack_sample`]).
+//!
+//! With the feature `host` (which needs `std`), [`host`] is the PC side: the acquisition state
+//! machine over any byte [`host::Link`] and the [`host::Calibration`] that turns readings into a
+//! record.
 #![no_std]
 #![warn(missing_docs)]
 
+#[cfg(feature = "std")]
+extern crate std;
+
 mod cobs;
 mod crc;
+#[cfg(feature = "host")]
+pub mod host;
 mod packing;
 
 pub use cobs::{cobs_decode_in_place, cobs_encode, cobs_max_encoded_len};
@@ -47,6 +56,12 @@ pub const MAX_BODY: usize = 255;
 pub const MAX_FRAME: usize = cobs_max_encoded_len(MAX_BODY) + 1;
 /// Most samples in one [`Reply::Samples`] block.
 pub const MAX_BLOCK_SAMPLES: usize = 32;
+/// Bytes a stored sample takes in the logger's flash (42 bits, padded).
+pub const SAMPLE_BYTES: u32 = 6;
+/// The flash of the paper's logger: 16 Mbit \[bytes\].
+pub const FLASH_BYTES: u32 = 16 * 1024 * 1024 / 8;
+/// Highest sample rate the logger accepts \[Hz\].
+pub const MAX_RATE_HZ: u16 = 10_000;
 /// The channel mask of all four channels: voltage, current, speed (ADC) and encoder.
 pub const ALL_CHANNELS: u8 = 0b1111;
 

@@ -4,12 +4,13 @@ use std::io::{IsTerminal, Read, Write};
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
-use daq_emu::host::Calibration;
 
 use crate::args::AcquireArgs;
-use crate::daq_client::{acquire, to_record, AcquireError, Link, Phase, Stats, TestPlan};
 use crate::record_csv::write_file;
 use crate::{settings, BadInput};
+use daq_protocol::host::{
+    acquire, to_record, AcquireError, Calibration, Link, Phase, Stats, TestPlan,
+};
 
 /// A serial port as a [`Link`].
 struct SerialLink(Box<dyn serialport::SerialPort>);
@@ -203,11 +204,11 @@ pub fn run(a: &AcquireArgs) -> Result<()> {
         ))
         .into());
     }
-    if a.rate == 0 || a.rate > daq_emu::MAX_RATE_HZ {
+    if a.rate == 0 || a.rate > daq_protocol::MAX_RATE_HZ {
         return Err(BadInput(format!(
             "--rate {}: expected 1 to {} Hz",
             a.rate,
-            daq_emu::MAX_RATE_HZ
+            daq_protocol::MAX_RATE_HZ
         ))
         .into());
     }

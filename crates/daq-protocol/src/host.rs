@@ -1,15 +1,87 @@
-//! The PC side of the logger protocol (`docs/wire-format.md`): runs a step test through a
-//! [`Link`] and collects every sample, re-requesting what the line lost; never returns a
-//! sample from a frame that failed its check.
+//! The PC side of the logger protocol (feature `host`, with `std`): runs a step test through a
+//! [`Link`] and collects every sample, re-requesting what the line lost, and turns the samples
+//! into a record of SPEC section 4 through the conditioning's [`Calibration`]. It never returns
+//! a sample from a frame that failed its check. A program talking to real hardware depends on
+//! this module only (the emulator, `daq-emu`, is the other end of the line).
 
 use std::io;
+use std::string::String;
 use std::time::{Duration, Instant};
+use std::vec::Vec;
+use std::{format, vec};
 
-use daq_emu::host::Calibration;
-use daq_protocol::{
-    encode, Command, Decoder, ErrorCode, Frame, Mode, Reply, Sample, State, ALL_CHANNELS, MAX_FRAME,
+use motor_model::{
+    central_difference, Adc as AdcModel, MeasurementModel, ModelError, Range, Record,
 };
-use motor_model::{central_difference, Record};
+use serde::{Deserialize, Serialize};
+
+use crate::{
+    encode, Command, Decoder, ErrorCode, Frame, Mode, Reply, Sample, State, ALL_CHANNELS,
+    FLASH_BYTES, MAX_FRAME, SAMPLE_BYTES,
+};
+
+/// How the logger's readings map to SI units: the physical value at 0 V and at 5 V of each
+/// conditioned analog channel (ADC codes 0 and 1023), and the encoder's counts per revolution.
+/// The file format of `motorid acquire --calibration FILE.json`:
+/// `{"voltage": [-50, 50], "current": [-200, 200], "speed": [-250, 250], "counts_per_rev": 2000}`
+/// (V, A, rad/s; the defaults, which the emulator uses).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Calibration {
+    /// Armature voltage at 0 V and 5 V \[V\].
+    pub voltage: [f64; 2],
+    /// Armature current at 0 V and 5 V \[A\].
+    pub current: [f64; 2],
+    /// Tachometer speed at 0 V and 5 V \[rad/s\].
+    pub speed: [f64; 2],
+    /// Encoder counts per revolution (after quadrature decoding).
+    pub counts_per_rev: u32,
+}
+
+impl Default for Calibration {
+    fn default() -> Self {
+        Calibration {
+            voltage: [-50.0, 50.0],
+            current: [-200.0, 200.0],
+            speed: [-250.0, 250.0],
+            counts_per_rev: 2000,
+        }
+    }
+}
+
+impl Calibration {
+    /// The three analog ranges, validated.
+    pub fn ranges(&self) -> Result<[Range; 3], ModelError> {
+        Ok([
+            Range::new(self.voltage[0], self.voltage[1])?,
+            Range::new(self.current[0], self.current[1])?,
+            Range::new(self.speed[0], self.speed[1])?,
+        ])
+    }
+
+    /// The value \[SI\] of ADC `code` on `channel` (0 voltage, 1 current, 2 speed).
+    pub fn analog(&self, channel: usize, code: u16) -> f64 {
+        let r = [self.voltage, self.current, self.speed][channel.min(2)];
+        AdcModel { bits: 10 }.to_value(Range { lo: r[0], hi: r[1] }, u32::from(code))
+    }
+
+    /// The angle \[rad\] of an unwrapped encoder count.
+    pub fn angle(&self, count: i64) -> f64 {
+        count as f64 * (std::f64::consts::TAU / f64::from(self.counts_per_rev))
+    }
+
+    /// The measurement chain of this calibration with `noise_lsb` of ADC noise and `seed`: the
+    /// settings under which `motorid simulate` gives the logger's records.
+    pub fn measurement(&self, noise_lsb: f64, seed: u64) -> Result<MeasurementModel, ModelError> {
+        Ok(MeasurementModel::logger(
+            10,
+            self.ranges()?,
+            noise_lsb,
+            self.counts_per_rev,
+            seed,
+        ))
+    }
+}
 
 /// A byte link to the logger.
 pub trait Link {
@@ -49,17 +121,17 @@ impl TestPlan {
         if samples > FLASH_SAMPLES || self.duration_ms() > u64::from(u32::MAX) {
             return Err(AcquireError::Refused(format!(
                 "{} s at {} Hz is {samples} samples; the logger's 16 Mbit flash holds at most {FLASH_SAMPLES} ({} bytes a sample): shorten the test or lower the rate",
-                crate::settings::shown(self.duration_s),
+                duration_text(self.duration_s),
                 self.rate_hz,
-                daq_emu::SAMPLE_BYTES
+                SAMPLE_BYTES
             )));
         }
         Ok(())
     }
 }
 
-/// Samples the logger's flash holds: 16 Mbit at [`daq_emu::SAMPLE_BYTES`] a sample.
-pub const FLASH_SAMPLES: u64 = (daq_emu::FLASH_BYTES / daq_emu::SAMPLE_BYTES) as u64;
+/// Samples the logger's flash holds: 16 Mbit at [`SAMPLE_BYTES`] a sample.
+pub const FLASH_SAMPLES: u64 = (FLASH_BYTES / SAMPLE_BYTES) as u64;
 
 /// Where an acquisition stands, for progress.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -389,8 +461,8 @@ fn collect<L: Link>(
                 count,
             },
             |g| match g {
-                Got::Ack { command } if *command == daq_protocol::kind::DUMP => Some(Ok(())),
-                Got::Error { code, command } if *command == daq_protocol::kind::DUMP => {
+                Got::Ack { command } if *command == crate::kind::DUMP => Some(Ok(())),
+                Got::Error { code, command } if *command == crate::kind::DUMP => {
                     Some(refused("the dump", *code))
                 }
                 _ => None,
@@ -466,7 +538,7 @@ pub fn acquire<L: Link>(
         _ => None,
     })?;
     s.request(Command::Stop, |g| match g {
-        Got::Ack { command } if *command == daq_protocol::kind::STOP => Some(Ok(())),
+        Got::Ack { command } if *command == crate::kind::STOP => Some(Ok(())),
         _ => None,
     })?;
     s.inbox.clear();
@@ -476,8 +548,8 @@ pub fn acquire<L: Link>(
             channels: ALL_CHANNELS,
         },
         |g| match g {
-            Got::Ack { command } if *command == daq_protocol::kind::CONFIGURE => Some(Ok(())),
-            Got::Error { code, command } if *command == daq_protocol::kind::CONFIGURE => {
+            Got::Ack { command } if *command == crate::kind::CONFIGURE => Some(Ok(())),
+            Got::Error { code, command } if *command == crate::kind::CONFIGURE => {
                 Some(refused("the configuration", *code))
             }
             _ => None,
@@ -498,13 +570,13 @@ pub fn acquire<L: Link>(
             mode: if plan.live { Mode::Live } else { Mode::Record },
         },
         |g| match g {
-            Got::Ack { command } if *command == daq_protocol::kind::ARM => Some(Ok(())),
+            Got::Ack { command } if *command == crate::kind::ARM => Some(Ok(())),
             // An Arm whose Ack was lost, sent again, finds the test running.
             Got::Error {
                 code: ErrorCode::Busy,
                 command,
-            } if *command == daq_protocol::kind::ARM && armed_once => Some(Ok(())),
-            Got::Error { code, command } if *command == daq_protocol::kind::ARM => {
+            } if *command == crate::kind::ARM && armed_once => Some(Ok(())),
+            Got::Error { code, command } if *command == crate::kind::ARM => {
                 armed_once = true;
                 if *code == ErrorCode::Busy {
                     None
@@ -551,7 +623,7 @@ pub fn to_record(acquired: &Acquired, calibration: &Calibration) -> Record {
     let dt = 1.0 / f64::from(acquired.rate_hz);
     let n = acquired.samples.len();
     let t: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
-    let modulus = i64::from(daq_protocol::ENCODER_MODULUS);
+    let modulus = i64::from(crate::ENCODER_MODULUS);
     let mut unwrapped = Vec::with_capacity(n);
     let mut last: Option<(i64, i64)> = None;
     for s in &acquired.samples {
@@ -594,133 +666,11 @@ pub fn to_record(acquired: &Acquired, calibration: &Calibration) -> Record {
     }
 }
 
-#[cfg(test)]
-pub mod tests {
-    use super::*;
-    use daq_emu::host::{Emulator, LineFaults, Plant};
-
-    /// The emulator as a link, in-process: what is sent is received by the firmware, which
-    /// then runs until it has nothing to do.
-    pub struct EmulatorLink {
-        pub emulator: Emulator,
-        pending: Vec<u8>,
-    }
-
-    impl EmulatorLink {
-        pub fn new(emulator: Emulator) -> Self {
-            EmulatorLink {
-                emulator,
-                pending: Vec::new(),
-            }
-        }
-    }
-
-    impl Link for EmulatorLink {
-        fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
-            if self.emulator.line_closed() {
-                return Err(io::Error::new(
-                    io::ErrorKind::BrokenPipe,
-                    "the line is closed",
-                ));
-            }
-            self.emulator.receive(bytes);
-            Ok(())
-        }
-
-        fn recv(&mut self, buf: &mut [u8], _timeout: Duration) -> io::Result<usize> {
-            if self.pending.is_empty() {
-                self.pending = self.emulator.run(Duration::from_secs(5));
-            }
-            let n = self.pending.len().min(buf.len());
-            buf[..n].copy_from_slice(&self.pending[..n]);
-            self.pending.drain(..n);
-            Ok(n)
-        }
-    }
-
-    fn plan(volts: f64, live: bool) -> TestPlan {
-        TestPlan {
-            volts,
-            duration_s: 2.0,
-            rate_hz: 1000,
-            live,
-        }
-    }
-
-    /// What `motorid simulate` gives with the emulator's measurement settings.
-    fn simulated(volts: f64, seed: u64) -> Record {
-        let cal = Calibration::default();
-        let trace = motor_model::simulate(
-            &motor_model::MotorParams::paper(),
-            motor_model::Effects::none(),
-            &motor_model::Input::step(volts, 0.0).unwrap(),
-            2.0,
-            1000.0,
-        )
-        .unwrap();
-        cal.measurement(1.0, seed).unwrap().apply(&trace).unwrap()
-    }
-
-    #[test]
-    fn a_clean_line_gives_simulate_sample_for_sample_in_both_modes() {
-        let mut link = EmulatorLink::new(Emulator::new(Plant::default(), false));
-        for (k, live) in [(0u64, false), (1, true)] {
-            let got = acquire(&mut link, &plan(40.0, live), |_| {}).unwrap();
-            assert_eq!(got.samples.len(), 2001);
-            assert_eq!(got.stats.retries, 0);
-            let record = to_record(&got, &Calibration::default());
-            assert_eq!(record, simulated(40.0, 1 + k), "live = {live}");
-        }
-    }
-
-    #[test]
-    fn bit_errors_and_dropped_bytes_are_recovered_by_retransmission() {
-        for faults in [
-            LineFaults {
-                bit_error_rate: 1e-3,
-                seed: 3,
-                ..LineFaults::default()
-            },
-            LineFaults {
-                drop_rate: 1e-3,
-                seed: 4,
-                ..LineFaults::default()
-            },
-        ] {
-            for live in [false, true] {
-                let emulator = Emulator::new(Plant::default(), false).with_faults(faults);
-                let mut link = EmulatorLink::new(emulator);
-                let got = acquire(&mut link, &plan(40.0, live), |_| {}).unwrap();
-                assert!(
-                    got.stats.bad_frames + got.stats.lost_frames > 0,
-                    "{faults:?}: no fault seen"
-                );
-                assert!(got.stats.retries > 0, "{faults:?}, live {live}");
-                let record = to_record(&got, &Calibration::default());
-                assert_eq!(
-                    record,
-                    simulated(40.0, 1),
-                    "{faults:?}, live {live}: a wrong sample"
-                );
-            }
-        }
-    }
-
-    #[test]
-    fn a_line_closed_during_the_dump_is_an_error_that_says_what_was_lost() {
-        let faults = LineFaults {
-            close_after: Some(3000),
-            ..LineFaults::default()
-        };
-        let emulator = Emulator::new(Plant::default(), false).with_faults(faults);
-        let mut link = EmulatorLink::new(emulator);
-        let err = acquire(&mut link, &plan(40.0, false), |_| {}).unwrap_err();
-        let text = err.to_string();
-        eprintln!("{text}");
-        assert!(
-            text.contains("samples not received (first missing: sample"),
-            "{text}"
-        );
-        assert!(text.contains("nothing written"), "{text}");
+/// A test length for a message: as given up to 1e9 s, beyond that only its order.
+fn duration_text(duration_s: f64) -> String {
+    if duration_s.abs() <= 1e9 {
+        format!("{duration_s}")
+    } else {
+        format!("{duration_s:.0e}")
     }
 }
