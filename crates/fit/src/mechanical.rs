@@ -68,6 +68,20 @@ pub struct MechanicalFit {
     pub fitted: FittedTorque,
 }
 
+impl MechanicalFit {
+    /// The identified axis with named fields: J (or M), f, Ts and the offset, in the units of the
+    /// torque (force) column and the position (kg or kg·m², N·s/m or N·m·s/rad, N or N·m).
+    pub fn axis(&self) -> motor_model::AxisParams {
+        let [mass_kg, viscous_ns_per_m, coulomb_n, offset_n] = self.values;
+        motor_model::AxisParams {
+            mass_kg,
+            viscous_ns_per_m,
+            coulomb_n,
+            offset_n,
+        }
+    }
+}
+
 /// The torque the inverse model was fitted to, and its model, on the decimated grid.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct FittedTorque {

@@ -39,7 +39,11 @@ mod sim;
 mod steady;
 mod step;
 
-pub use axis::{simulate_pd_axis, AxisParams, PdController};
+pub use axis::{
+    pulse_split, relative_error_percent, simulate_pd_axis, AxisParams, PdController, PulseSplit,
+    EMPS_DRIVE_GAIN_N_PER_V, EMPS_KP_PER_S, EMPS_KV_V_PER_M_S, EMPS_PULSE_COMMAND_V,
+    EMPS_PULSE_FORCE_N,
+};
 pub use derived::{Derived, Regime};
 pub use error::ModelError;
 pub use measure::{

@@ -1,17 +1,18 @@
 //! `motorid emps`: the EMPS benchmark — identify the axis on its estimation record, then
 //! simulate it in its closed loop on the validation record, where unknown force pulses act.
 //!
-//! Constants from EMPS_Description (Sec. 1.3, 2.2): drive gain gτ = 35.15 N/V, position gain
-//! kp = 160.18 1/s, velocity gain kv = 243.45 V/(m/s), 1 kHz.
-//!
-//! A finding about the data: the column `pulses_N` is not in newtons. The recorded command
-//! `vir` jumps by exactly ±5.0 at every pulse edge (e.g. 0.833 → 5.907 at t = 0.344 s), so the
-//! pulses are 5 units of drive command added before the drive: 5 × 35.15 = 175.75 N on the axis.
+//! The benchmark's constants, its relative error and the pulse-on/off split are
+//! `motor_model`'s ([`PdController::emps`], [`EMPS_PULSE_COMMAND_V`], [`relative_error_percent`],
+//! [`pulse_split`]): the column `pulses_N` is 5 V of drive command, 175.75 N on the axis.
 //! Simulated that way, the validation record is matched as closely as the estimation record.
 
 use anyhow::Result;
 use fit::{identify_inverse_model, InverseModelSettings, MECHANICAL_NAMES};
-use motor_model::{simulate_pd_axis, AxisParams, PdController};
+use motor_model::{
+    pulse_split, relative_error_percent, simulate_pd_axis, PdController,
+    EMPS_DRIVE_GAIN_N_PER_V as DRIVE_GAIN_N_PER_V, EMPS_KP_PER_S, EMPS_KV_V_PER_M_S,
+    EMPS_PULSE_COMMAND_V, EMPS_PULSE_FORCE_N,
+};
 use serde_json::json;
 
 use plotters::style::{BLACK, BLUE, RED};
@@ -21,12 +22,6 @@ use crate::plot::{self, Panel, Series};
 use crate::record_csv::{read_table, Table};
 use crate::BadInput;
 
-/// EMPS drive gain gτ \[N/V\] (EMPS_Description Eq. (7)).
-const DRIVE_GAIN_N_PER_V: f64 = 35.15;
-/// EMPS position gain kp \[1/s\] (Eq. (6)).
-const KP_PER_S: f64 = 160.18;
-/// EMPS velocity gain kv \[V/(m/s)\] (Eq. (6)).
-const KV_V_PER_M_S: f64 = 243.45;
 /// Published IDIM-LS estimates (M, Fv, Fc, offset) the benchmark reports.
 const REFERENCE: [f64; 4] = [95.1089, 203.5034, 20.3935, -3.1648];
 
@@ -37,22 +32,6 @@ fn column<'a>(table: &'a Table, name: &str, file: &str) -> Result<&'a [f64]> {
         ))
         .into()
     })
-}
-
-/// `100 ‖a − b‖ / ‖a‖` — the benchmark's relative error, Eq. (11) of its description.
-fn relative_error_percent(measured: &[f64], simulated: &[f64]) -> f64 {
-    let num: f64 = measured
-        .iter()
-        .zip(simulated)
-        .map(|(a, b)| (a - b).powi(2))
-        .sum();
-    let den: f64 = measured.iter().map(|a| a * a).sum();
-    100.0 * (num / den).sqrt()
-}
-
-fn rms(x: impl Iterator<Item = f64>) -> f64 {
-    let (sum, n) = x.fold((0.0, 0usize), |(s, n), v| (s + v * v, n + 1));
-    (sum / n.max(1) as f64).sqrt()
 }
 
 pub fn run(a: &EmpsArgs) -> Result<()> {
@@ -76,17 +55,8 @@ pub fn run(a: &EmpsArgs) -> Result<()> {
         InverseModelSettings::default(),
     )
     .map_err(|e| BadInput(format!("{est_name}: {e}")))?;
-    let axis = AxisParams {
-        inertia: fit.values[0],
-        viscous: fit.values[1],
-        coulomb: fit.values[2],
-        offset: fit.values[3],
-    };
-    let pd = PdController {
-        kp: KP_PER_S,
-        kv: KV_V_PER_M_S,
-        drive_gain: DRIVE_GAIN_N_PER_V,
-    };
+    let axis = fit.axis();
+    let pd = PdController::emps();
 
     // Simulate each record in closed loop from its reference; the validation one without and
     // with its force pulses.
@@ -132,20 +102,11 @@ pub fn run(a: &EmpsArgs) -> Result<()> {
     // While a pulse is on, the PD loop holds the axis off its reference by about
     // F/(gτ kp kv); that is where an unmodelled pulse shows.
     let near: Vec<bool> = pulses.iter().map(|p| *p != 0.0).collect();
-    let split = |q: &[f64]| {
-        let err = |keep: bool| {
-            rms(qm
-                .iter()
-                .zip(q)
-                .zip(&near)
-                .filter(|(_, n)| **n == keep)
-                .map(|((m, s), _)| m - s))
-        };
-        (err(true), err(false))
-    };
-    let (near_no, far_no) = split(&q_val);
-    let (near_with, far_with) = split(&q_val_p);
-    let near_fraction = near.iter().filter(|n| **n).count() as f64 / near.len() as f64;
+    let without = pulse_split(qm, &q_val, &near);
+    let with = pulse_split(qm, &q_val_p, &near);
+    let (near_no, far_no) = (without.rms_on, without.rms_off);
+    let (near_with, far_with) = (with.rms_on, with.rms_off);
+    let near_fraction = without.fraction_on;
 
     if let Some(dir) = &a.plot {
         std::fs::create_dir_all(dir)
@@ -178,7 +139,9 @@ pub fn run(a: &EmpsArgs) -> Result<()> {
                 Panel {
                     y_label: "pulse force [N]",
                     series: vec![Series {
-                        label: "pulses (5 V of command x 35.15 N/V)",
+                        label: &format!(
+                            "pulses ({EMPS_PULSE_COMMAND_V} V of command x {DRIVE_GAIN_N_PER_V} N/V)"
+                        ),
                         values: &pulse_force,
                         color: BLACK,
                     }],
@@ -203,7 +166,7 @@ pub fn run(a: &EmpsArgs) -> Result<()> {
                 "with_pulses": {"position_relerr_percent": val_pos_p, "force_relerr_percent": val_force_p,
                                  "position_rms_pulse_on_m": near_with, "position_rms_pulse_off_m": far_with},
                 "fraction_of_time_pulse_on": near_fraction,
-                "pulse_force_n": 5.0 * DRIVE_GAIN_N_PER_V,
+                "pulse_force_n": EMPS_PULSE_FORCE_N,
             },
         });
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -218,14 +181,14 @@ pub fn run(a: &EmpsArgs) -> Result<()> {
             100.0 * (v / r - 1.0)
         );
     }
-    println!("closed-loop simulation (PD: kp = {KP_PER_S} 1/s, kv = {KV_V_PER_M_S} V/(m/s)), relative errors 100·‖x − x̂‖/‖x‖:");
+    println!("closed-loop simulation (PD: kp = {EMPS_KP_PER_S} 1/s, kv = {EMPS_KV_V_PER_M_S} V/(m/s)), relative errors 100·‖x − x̂‖/‖x‖:");
     println!(
         "  estimation record:                 position {est_pos:.4} %, force {est_force:.2} %"
     );
     println!(
         "  validation record, pulses unmodelled: position {val_pos:.4} %, force {val_force:.2} %"
     );
-    println!("  validation record, pulses added:      position {val_pos_p:.4} %, force {val_force_p:.2} %  (pulses as 5 V of drive command = 175.75 N: the recorded vir jumps by ±5 at each edge)");
+    println!("  validation record, pulses added:      position {val_pos_p:.4} %, force {val_force_p:.2} %  (pulses as {EMPS_PULSE_COMMAND_V} V of drive command = {EMPS_PULSE_FORCE_N} N: the recorded vir jumps by ±{EMPS_PULSE_COMMAND_V} at each edge)");
     println!(
         "where it hurts: position RMS error while a pulse is on ({:.0} % of the time) {:.3e} m with the pulses unmodelled, {:.3e} m with them; while off {:.3e} m / {:.3e} m",
         100.0 * near_fraction, near_no, near_with, far_no, far_with
