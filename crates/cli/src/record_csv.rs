@@ -325,19 +325,15 @@ fn parse_table(reader: &mut impl BufRead) -> std::result::Result<Table, (usize, 
             parse_header(&mut table, line, line_no)?;
             continue;
         }
-        let fields: Vec<&str> = line.split(',').collect();
-        if fields.len() != table.names.len() {
-            return Err((
-                line_no,
-                format!(
-                    "{} fields where the header has {} (a line cut short?)",
-                    fields.len(),
-                    table.names.len()
-                ),
-            ));
-        }
-        for (k, field) in fields.iter().enumerate() {
-            let name = &table.names[k];
+        // Fields parsed as they are split (no per-line vector): reading is most of a step
+        // identification's time.
+        let width = table.names.len();
+        let mut count = 0usize;
+        for field in line.split(',') {
+            let Some(name) = table.names.get(count) else {
+                count += 1;
+                break;
+            };
             let v: f64 = field.trim().parse().map_err(|_| {
                 (
                     line_no,
@@ -350,7 +346,19 @@ fn parse_table(reader: &mut impl BufRead) -> std::result::Result<Table, (usize, 
                     format!("column `{name}` is {v}: every value must be finite"),
                 ));
             }
-            table.columns[k].push(v);
+            table.columns[count].push(v);
+            count += 1;
+        }
+        if count != width {
+            let fields = if count > width {
+                line.split(',').count()
+            } else {
+                count
+            };
+            return Err((
+                line_no,
+                format!("{fields} fields where the header has {width} (a line cut short?)"),
+            ));
         }
         table.lines.push(line_no);
     }
