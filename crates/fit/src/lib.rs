@@ -60,7 +60,8 @@ pub use lm::{
     solve, LeastSquares, LevenbergMarquardt, LmReport, LmSettings, NormalEquations, Termination,
 };
 pub use mechanical::{
-    identify_inverse_model, FittedTorque, InverseModelSettings, MechanicalFit, MECHANICAL_NAMES,
+    identify_inverse_model, identify_inverse_model_pooled, AxisRecord, FittedTorque,
+    InverseModelSettings, MechanicalFit, OffsetStatus, MECHANICAL_NAMES,
 };
 pub use model33::{fit_33, Fit33, Params33, Record33};
 pub use output_error::{

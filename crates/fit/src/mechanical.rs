@@ -13,7 +13,7 @@ use nalgebra::{DMatrix, DVector};
 use crate::error::FitError;
 use crate::lm::NormalEquations;
 use crate::signal::{decimate, Butterworth};
-use crate::stats::uncertainty;
+use crate::stats::{sandwich_uncertainty, NeweyWest};
 
 /// Names of the mechanical parameters, in the order of every array here.
 pub const MECHANICAL_NAMES: [&str; 4] = ["J", "f", "Ts", "offset"];
@@ -63,9 +63,12 @@ pub struct MechanicalFit {
     pub residual_rms: f64,
     /// `100 (1 − ‖τ − Φθ‖/‖τ − τ̄‖)` \[%\].
     pub nrmse_fit_percent: f64,
-    /// The fitted samples: torque as measured and as the model gives it, both low-passed and
-    /// decimated as in the fit (torque unit).
-    pub fitted: FittedTorque,
+    /// Whether the offset was fitted, or fixed at 0 and why.
+    pub offset_status: OffsetStatus,
+    /// The fitted samples of each record, in the order given: torque as measured and as the
+    /// model gives it, both low-passed and decimated as in the fit (torque unit); samples at
+    /// rest are left out.
+    pub fitted: Vec<FittedTorque>,
 }
 
 impl MechanicalFit {
@@ -82,31 +85,88 @@ impl MechanicalFit {
     }
 }
 
-/// The torque the inverse model was fitted to, and its model, on the decimated grid.
+/// The torque the inverse model was fitted to, and its model, on the decimated grid (the
+/// samples in motion only: where the axis rests the grid has gaps).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct FittedTorque {
-    /// Time of the first fitted sample from the record's first sample \[s\].
-    pub t0_s: f64,
-    /// Their spacing \[s\] (the sample period times the decimation).
-    pub dt_s: f64,
+    /// Time of each fitted sample from the record's first sample \[s\].
+    pub t_s: Vec<f64>,
     /// Measured (filtered) torque.
     pub measured: Vec<f64>,
     /// `Φθ`: the model's torque.
     pub model: Vec<f64>,
 }
 
+/// One record of a current- or force-driven axis for [`identify_inverse_model_pooled`].
+#[derive(Debug, Clone, Copy)]
+pub struct AxisRecord<'a> {
+    /// Sample period \[s\].
+    pub dt: f64,
+    /// Motor torque (or force) `k I` at each sample (axis torque unit).
+    pub torque: &'a [f64],
+    /// Position (rad or m) at each sample, any offset.
+    pub position: &'a [f64],
+}
+
+/// What became of the constant offset of an inverse-model fit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OffsetStatus {
+    /// Fitted with the other parameters (the axis moved both ways).
+    Fitted,
+    /// Fixed at 0 because the settings say so ([`InverseModelSettings::fit_offset`] false).
+    FixedBySettings,
+    /// Fixed at 0 because the axis moved in one direction only: `sign(q̇)` is then constant
+    /// while it moves, so a constant load cannot be told from Ts, and Ts carries it.
+    FixedOneDirection,
+}
+
+/// Fewest decimated rows in each direction of motion for the offset to be told from Ts.
+const MIN_ROWS_EACH_WAY: usize = 20;
+
 /// Identifies `[J, f, Ts, offset]` from the motor torque (or force) `torque` and the position
-/// `position`, sampled every `dt` \[s\].
+/// `position`, sampled every `dt` \[s\] ([`identify_inverse_model_pooled`] of one record).
 pub fn identify_inverse_model(
     dt: f64,
     torque: &[f64],
     position: &[f64],
     settings: InverseModelSettings,
 ) -> Result<MechanicalFit, FitError> {
+    identify_inverse_model_pooled(
+        &[AxisRecord {
+            dt,
+            torque,
+            position,
+        }],
+        settings,
+    )
+}
+
+/// The regressor rows of one record: its observation matrix columns (`q̈`, `q̇`, `sign q̇`)
+/// and torque, filtered and decimated, ends dropped, samples at rest left out.
+struct Rows {
+    columns: [Vec<f64>; 3],
+    torque: Vec<f64>,
+    t_s: Vec<f64>,
+}
+
+/// Filters, differentiates and decimates record `index` (0-based) into regressor rows.
+fn record_rows(
+    index: usize,
+    rec: &AxisRecord<'_>,
+    settings: &InverseModelSettings,
+) -> Result<Rows, FitError> {
+    let label = |series: &str| {
+        if index == 0 {
+            series.to_string()
+        } else {
+            format!("record {} {series}", index + 1)
+        }
+    };
     let bad = |series: &str, reason: String| FitError::BadData {
-        series: series.into(),
+        series: label(series),
         reason,
     };
+    let (dt, torque, position) = (rec.dt, rec.torque, rec.position);
     let n = torque.len();
     if position.len() != n {
         return Err(bad(
@@ -147,57 +207,134 @@ pub fn identify_inverse_model(
     let q = filter.filtfilt(position);
     let qd = central(&q, dt);
     let qdd = central(&qd, dt);
-    if qd.iter().all(|v| *v == 0.0) {
+    // At rest the filtered speed is rounding noise around 0 and the friction torque is anything
+    // in [−Ts, Ts] (static friction holds the axis): such samples carry no equation. The axis
+    // is at rest where the filtered speed stays below half a position step per filter time
+    // constant (the step: the smallest change of the position record).
+    let quantum = position
+        .windows(2)
+        .map(|w| (w[1] - w[0]).abs())
+        .filter(|d| *d > 0.0)
+        .fold(f64::INFINITY, f64::min);
+    let peak_speed = qd.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    if peak_speed == 0.0 || !quantum.is_finite() {
         return Err(bad(
             "position",
             "the axis never moves: nothing to identify".into(),
         ));
     }
-    let mut columns = vec![
-        qdd,
-        qd.clone(),
-        qd.iter()
-            .map(|v| {
-                if *v > 0.0 {
-                    1.0
-                } else if *v < 0.0 {
-                    -1.0
-                } else {
-                    0.0
-                }
-            })
-            .collect(),
-    ];
-    if settings.fit_offset {
-        columns.push(vec![1.0; n]);
-    }
-    let p = columns.len();
+    let rest_speed = (0.5 * quantum * std::f64::consts::TAU * settings.position_cutoff_hz)
+        .max(1e-9 * peak_speed);
+    let moving: Vec<f64> = qd
+        .iter()
+        .map(|v| f64::from(u8::from(v.abs() > rest_speed)))
+        .collect();
+    let sign: Vec<f64> = qd
+        .iter()
+        .zip(&moving)
+        .map(|(v, m)| m * v.signum())
+        .collect();
     let k = settings.decimation.max(1);
     let y = decimate(torque, k)?;
-    let phi: Vec<Vec<f64>> = columns
-        .iter()
-        .map(|c| decimate(c, k))
-        .collect::<Result<_, _>>()?;
+    let cols = [decimate(&qdd, k)?, decimate(&qd, k)?, decimate(&sign, k)?];
+    // A decimated row is at rest if any sample behind it is (the decimation filter's span).
+    let span = 2 * k + 1;
+    let moving_run: Vec<bool> = (0..y.len())
+        .map(|r| {
+            let c = r * k;
+            let lo = c.saturating_sub(span);
+            let hi = (c + span + 1).min(n);
+            moving[lo..hi].iter().all(|m| *m == 1.0)
+        })
+        .collect();
     // Drop the ends, where the filters' edge handling dominates (10 decimated samples each).
     let edge = 10.min(y.len() / 4);
-    let rows = edge..y.len() - edge;
-    let m = rows.len();
-    let a = DMatrix::from_fn(m, p, |i, j| phi[j][rows.start + i]);
-    let b = DVector::from_iterator(m, rows.clone().map(|i| y[i]));
+    let keep: Vec<usize> = (edge..y.len() - edge).filter(|&r| moving_run[r]).collect();
+    Ok(Rows {
+        columns: cols.map(|c| keep.iter().map(|&r| c[r]).collect()),
+        torque: keep.iter().map(|&r| y[r]).collect(),
+        t_s: keep.iter().map(|&r| (r * k) as f64 * dt).collect(),
+    })
+}
+
+/// Identifies `[J, f, Ts, offset]` from several records of one axis, pooled into one least
+/// squares problem: each record is filtered and differentiated on its own (its own filter
+/// state, no jump where one record ends and the next begins), samples at rest are left out
+/// (static friction holds any torque up to Ts there), and the rows are stacked. The offset is
+/// fitted when [`InverseModelSettings::fit_offset`] asks for it and the records move both ways
+/// for at least 20 decimated samples each; else it is fixed at 0 and Ts carries any constant
+/// load ([`MechanicalFit::offset_status`] says which).
+pub fn identify_inverse_model_pooled(
+    records: &[AxisRecord<'_>],
+    settings: InverseModelSettings,
+) -> Result<MechanicalFit, FitError> {
+    let bad = |series: &str, reason: String| FitError::BadData {
+        series: series.into(),
+        reason,
+    };
+    if records.is_empty() {
+        return Err(bad("records", "no record given".into()));
+    }
+    let rows: Vec<Rows> = records
+        .iter()
+        .enumerate()
+        .map(|(i, r)| record_rows(i, r, &settings))
+        .collect::<Result<_, _>>()?;
+    let m: usize = rows.iter().map(|r| r.torque.len()).sum();
+    let (forward, backward) = rows
+        .iter()
+        .flat_map(|r| &r.columns[2])
+        .fold((0, 0), |(f, b), s| {
+            (f + usize::from(*s > 0.5), b + usize::from(*s < -0.5))
+        });
+    let offset_status = if !settings.fit_offset {
+        OffsetStatus::FixedBySettings
+    } else if forward.min(backward) < MIN_ROWS_EACH_WAY {
+        OffsetStatus::FixedOneDirection
+    } else {
+        OffsetStatus::Fitted
+    };
+    let p = if offset_status == OffsetStatus::Fitted {
+        4
+    } else {
+        3
+    };
+    if m < 2 * p {
+        return Err(bad(
+            "record",
+            format!("{m} samples in motion after filtering and decimation: the axis must move for longer"),
+        ));
+    }
+    let a = DMatrix::from_fn(m, p, |i, j| {
+        let mut i = i;
+        for r in &rows {
+            if i < r.torque.len() {
+                return if j < 3 { r.columns[j][i] } else { 1.0 };
+            }
+            i -= r.torque.len();
+        }
+        0.0
+    });
+    let b = DVector::from_iterator(m, rows.iter().flat_map(|r| r.torque.iter().copied()));
     let jtj = a.transpose() * &a;
     let jtb = a.transpose() * &b;
     let theta = jtj
         .clone()
         .cholesky()
         .map(|c| c.solve(&jtb))
-        .ok_or_else(|| bad("record", "the regressors are collinear: the motion does not excite J, f, Ts and the offset separately (use a richer trajectory)".into()))?;
+        .ok_or_else(|| bad("record", "the regressors are collinear: the motion does not excite J, f and Ts separately (use a richer trajectory)".into()))?;
     let model = &a * &theta;
-    let fitted = FittedTorque {
-        t0_s: rows.start as f64 * k as f64 * dt,
-        dt_s: k as f64 * dt,
-        measured: b.iter().copied().collect(),
-        model: model.iter().copied().collect(),
-    };
+    let mut fitted = Vec::with_capacity(rows.len());
+    let mut at = 0;
+    for r in &rows {
+        let len = r.torque.len();
+        fitted.push(FittedTorque {
+            t_s: r.t_s.clone(),
+            measured: r.torque.clone(),
+            model: model.rows(at, len).iter().copied().collect(),
+        });
+        at += len;
+    }
     let residual = model - &b;
     let sse = residual.norm_squared();
     let mean = b.mean();
@@ -208,7 +345,29 @@ pub fn identify_inverse_model(
         cost: 0.5 * sse,
         n_residuals: m,
     };
-    let unc = uncertainty(&normal);
+    // Intervals from the Newey–West sandwich, record by record: the residuals of filtered,
+    // decimated signals are correlated over several samples, and the plain least-squares
+    // covariance would take them as independent.
+    let mut nw = NeweyWest::<4>::new(rows.first().map_or(0, |r| r.torque.len()));
+    let mut at = 0;
+    for (k, r) in rows.iter().enumerate() {
+        if k > 0 {
+            nw.new_series(r.torque.len());
+        }
+        for i in at..at + r.torque.len() {
+            nw.push(std::array::from_fn(|j| {
+                if j < p {
+                    residual[i] * a[(i, j)]
+                } else {
+                    0.0
+                }
+            }));
+        }
+        at += r.torque.len();
+    }
+    let unc = nw
+        .finish()
+        .and_then(|s| sandwich_uncertainty(&normal, &s.view((0, 0), (p, p)).into_owned()));
     // A fixed offset is exactly 0, its interval [0, 0].
     let values: [f64; 4] = std::array::from_fn(|i| theta.get(i).copied().unwrap_or(0.0));
     let half = |u: &crate::stats::Uncertainty, i: usize| u.ci95_half_width.get(i).copied();
@@ -228,6 +387,7 @@ pub fn identify_inverse_model(
         } else {
             f64::NAN
         },
+        offset_status,
         fitted,
     })
 }

@@ -548,10 +548,10 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
     if let Some(dir) = &a.plot {
         std::fs::create_dir_all(dir)
             .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
-        let f = &fit.fitted;
-        let t: Vec<f64> = (0..f.measured.len())
-            .map(|j| rec.t[0] + f.t0_s + j as f64 * f.dt_s)
-            .collect();
+        let Some(f) = fit.fitted.first() else {
+            anyhow::bail!("the inverse model returned no fitted samples");
+        };
+        let t: Vec<f64> = f.t_s.iter().map(|s| rec.t[0] + s).collect();
         let residual: Vec<f64> = f
             .measured
             .iter()
