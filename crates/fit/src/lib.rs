@@ -30,6 +30,7 @@
 mod checks;
 mod clipping;
 mod error;
+mod feedforward;
 mod full_model;
 mod input_uncertainty;
 mod lm;
@@ -49,6 +50,11 @@ pub use checks::{
 };
 pub use clipping::{find_clipping, MIN_CLIPPED_RUN};
 pub use error::FitError;
+pub use feedforward::{
+    identify_feedforward, simulate_feedforward, simulate_voltage_speed, FeedforwardFit,
+    FeedforwardParams, FeedforwardSettings, MechanicalFromFeedforward, SpeedRecord, TauE,
+    VoltageSpeedModel,
+};
 pub use full_model::{
     identify_full, identify_full_with_inputs, noise_std, Channel, ChannelQuality, FullFit,
     StepTest, PARAM_NAMES, PARAM_UNITS,
@@ -77,7 +83,8 @@ pub use plausibility::Refusal;
 pub use signal::{decimate, Butterworth};
 pub use start::steady_state_start;
 pub use stats::{
-    newey_west_lags, sandwich_uncertainty, student_t_quantile, uncertainty, NeweyWest, Uncertainty,
+    newey_west_lags, newey_west_score_covariance, sandwich_uncertainty, student_t_quantile,
+    uncertainty, NeweyWest, Uncertainty,
 };
 pub use steady_fit::{fit_apparent_resistance, SteadyFit};
 pub use step_location::{locate_step, locate_step_with, StepLocation};

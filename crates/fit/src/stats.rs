@@ -119,6 +119,39 @@ pub fn newey_west_lags(n: usize) -> usize {
     (4.0 * (n as f64 / 100.0).powf(2.0 / 9.0)).floor() as usize
 }
 
+/// The Newey–West covariance of the score `Jᵀr` of any number of parameters (the same
+/// estimate as [`NeweyWest`], from the whole residual vector `r` and Jacobian `J` at once):
+/// the rows are cut into independent series of the lengths in `series` (in order, summing to
+/// the row count), each with [`newey_west_lags`] of its length; a series of one row (a prior
+/// on a parameter) is its own. `None` if the lengths do not add up or an entry is not finite.
+pub fn newey_west_score_covariance(
+    r: &[f64],
+    jac: &DMatrix<f64>,
+    series: &[usize],
+) -> Option<DMatrix<f64>> {
+    let (n, p) = jac.shape();
+    if r.len() != n || series.iter().sum::<usize>() != n {
+        return None;
+    }
+    let g = DMatrix::from_fn(n, p, |i, j| r[i] * jac[(i, j)]);
+    let mut total = DMatrix::zeros(p, p);
+    let mut at = 0;
+    for &len in series {
+        let block = g.rows(at, len);
+        total += block.transpose() * block;
+        let lags = newey_west_lags(len).max(1).min(len.saturating_sub(1));
+        for l in 1..=lags {
+            let weight = 1.0 - l as f64 / (newey_west_lags(len).max(1) as f64 + 1.0);
+            let later = block.rows(l, len - l);
+            let earlier = block.rows(0, len - l);
+            let cross = later.transpose() * earlier;
+            total += (&cross + cross.transpose()) * weight;
+        }
+        at += len;
+    }
+    total.iter().all(|v| v.is_finite()).then_some(total)
+}
+
 /// Newey–West accumulator of the covariance of a score `Σᵢ gᵢ` over one time series of
 /// per-sample scores `gᵢ = rᵢ ∂rᵢ/∂θ` (`N` parameters):
 /// `Σᵢ gᵢgᵢᵀ + Σₗ wₗ Σᵢ (gᵢgᵢ₋ₗᵀ + gᵢ₋ₗgᵢᵀ)` with Bartlett weights `wₗ = 1 − l/(L+1)`.
@@ -307,5 +340,37 @@ mod tests {
         }
         assert!((student_t_quantile(0.5, 7.0)).abs() < 1e-12);
         assert!((student_t_quantile(0.025, 10.0) + 2.228).abs() < 5e-4);
+    }
+
+    /// The whole-vector Newey–West covariance equals the accumulator's, series by series.
+    #[test]
+    fn score_covariance_of_the_whole_vector_matches_the_accumulator() {
+        let n = [300usize, 1, 120];
+        let rows: usize = n.iter().sum();
+        let mut x = 0.3_f64;
+        let mut next = || {
+            x = (x * 3.7 + 0.11).fract();
+            x - 0.5
+        };
+        let r: Vec<f64> = (0..rows).map(|_| next()).collect();
+        let jac = DMatrix::from_fn(rows, 3, |_, _| next());
+        let whole = newey_west_score_covariance(&r, &jac, &n).unwrap();
+        let mut acc = NeweyWest::<3>::new(n[0]);
+        let mut at = 0;
+        for (k, len) in n.iter().enumerate() {
+            if k > 0 {
+                acc.new_series(*len);
+            }
+            for i in at..at + len {
+                acc.push(std::array::from_fn(|j| r[i] * jac[(i, j)]));
+            }
+            at += len;
+        }
+        let series = acc.finish().unwrap();
+        assert!(
+            (&whole - &series).norm() < 1e-12 * series.norm(),
+            "{whole} {series}"
+        );
+        assert!(newey_west_score_covariance(&r, &jac, &[rows - 1]).is_none());
     }
 }
