@@ -24,6 +24,10 @@
 //! The reported `σ_floor` is `√(mean vᵢ)` and the NRMSE floor `√(Σ vᵢ)/‖y − ȳ‖` (=
 //! `σ_floor √n/‖y − ȳ‖`); the gap is NRMSE − floor.
 //!
+//! Samples that the model puts within `3σ` of an ADC rail of a quantised channel (an extreme
+//! value held by at least 1 % of the samples: a current at rest on a unipolar channel) are left
+//! out of the tests (not of the NRMSE): the rail clips half of the noise there.
+//!
 //! # The excess test
 //!
 //! Over a set `S` of samples (a phase, a window, a band, the whole channel), `A = Σ rᵢ²` is
@@ -33,6 +37,21 @@
 //! Gaussian residuals). `A` is then a scaled chi-square (Satterthwaite): `A ~ s χ²_ν` with
 //! `s = c W/(2B)`, `ν = 2B²/(c W)`; the p-value is `P(χ²_ν > A/s)`. With white noise and a
 //! constant floor, `ν = n/c` is the effective sample size and `A/s = Σ r²/σ²`.
+//!
+//! # Where
+//!
+//! - Phases ([`PhaseKind`]) from the voltage levels ([`crate::voltage_input`]) and the measured
+//!   speed and current; the windows of `n/50` samples (half-overlapping) with the largest mean
+//!   excess `rᵢ² − vᵢ`.
+//! - Bands of |Ω| (a near-zero band, |Ω| ≤ 10 % of the largest, then equal-width bands) and of
+//!   |I|; the operating variable is the model's prediction for the channel itself and the
+//!   other sensor's measurement otherwise (a channel's own measurement would select its own
+//!   noise). Trends: the least-squares slope of `rᵢ² − vᵢ` on |x| with its t under the floor
+//!   model.
+//! - Welch spectrum of the residual against the floor's white density; harmonic regression on
+//!   the shaft angle.
+//! - Whiteness (autocorrelation with 99 % bounds, Ljung–Box) and cross-correlation with the
+//!   input's first difference, as MATLAB's `resid`.
 //!
 //! # False alarms
 //!
@@ -46,7 +65,9 @@
 //!
 //! Tests whose null hypothesis the encoder's quantisation breaks are reported but not used as
 //! evidence (`tested: false`): at constant speed the counts make a deterministic, periodic
-//! error, neither white nor flat in spectrum. An encoder speed is judged on magnitudes only.
+//! error, neither white nor flat in spectrum, whose sidebands put a speed ripple at other N per
+//! revolution. An encoder speed is judged on magnitudes only (whiteness, cross-correlation,
+//! spectrum and angle ripple are reported untested).
 
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 use rustfft::num_complex::Complex;
@@ -323,7 +344,7 @@ pub struct Band {
 }
 
 /// A trend of the excess `rᵢ² − vᵢ` with an operating variable |x|: the least-squares slope
-/// with a Newey–West (autocorrelation-consistent) standard error.
+/// with its standard error under the floor model (`c Σ (xᵢ − x̄)² wᵢ / Sxx²`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Trend {
     /// Slope of the excess per unit of |x| (channel unit² per unit of x).
@@ -1403,11 +1424,13 @@ fn bands(
         .map(|k| band(k, &members[k]))
         .collect();
     // The trend over the samples in the tests, above the near-zero band (tested apart).
-    let (excess, at): (Vec<f64>, Vec<f64>) = (0..r.len())
+    let used: Vec<usize> = (0..r.len())
         .filter(|&i| floor.keep[i] && !(near_zero_band && ax[i] <= zero_limit))
-        .map(|i| (r[i] * r[i] - floor.v[i], ax[i]))
-        .unzip();
-    let trend = hac_slope(&excess, &at).map(|(slope, t)| {
+        .collect();
+    let excess: Vec<f64> = used.iter().map(|&i| r[i] * r[i] - floor.v[i]).collect();
+    let at: Vec<f64> = used.iter().map(|&i| ax[i]).collect();
+    let wt: Vec<f64> = used.iter().map(|&i| floor.w[i]).collect();
+    let trend = floor_slope(&excess, &at, &wt, c).map(|(slope, t)| {
         let p_value = (2.0 * normal_sf(t.abs())).min(1.0);
         Trend {
             slope,
@@ -1424,9 +1447,13 @@ fn bands(
     }
 }
 
-/// Least-squares slope of `y` on `x` and its t statistic on a Newey–West standard error;
+/// Least-squares slope of the excess `y` on `x` and its t statistic under the floor model:
+/// `Var(slope) = c Σ (xᵢ − x̄)² wᵢ / Sxx²` with `wᵢ` the floor variance of `rᵢ²` and `c` the
+/// effective-sample-size factor. The variance is the floor's, not estimated from the residuals:
+/// a sandwich estimate is biased low exactly when a few high-leverage samples (a transient
+/// among thousands of steady-state ones) happen to lie low, and then overstates |t|.
 /// `None` when `x` is constant.
-fn hac_slope(y: &[f64], x: &[f64]) -> Option<(f64, f64)> {
+fn floor_slope(y: &[f64], x: &[f64], w: &[f64], c: f64) -> Option<(f64, f64)> {
     if y.len() < 2 {
         return None;
     }
@@ -1439,14 +1466,13 @@ fn hac_slope(y: &[f64], x: &[f64]) -> Option<(f64, f64)> {
     }
     let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - xm) * (b - ym)).sum();
     let slope = sxy / sxx;
-    let mut nw = NeweyWest::<1>::new(y.len());
-    for (a, b) in x.iter().zip(y) {
-        let e = b - ym - slope * (a - xm);
-        nw.push([(a - xm) * e]);
-    }
-    let s = nw.finish()?[(0, 0)];
-    let se = s.max(0.0).sqrt() / sxx;
-    (se > 0.0).then(|| (slope, slope / se))
+    let var: f64 = c * x
+        .iter()
+        .zip(w)
+        .map(|(a, w)| (a - xm).powi(2) * w)
+        .sum::<f64>()
+        / (sxx * sxx);
+    (var > 0.0).then(|| (slope, slope / var.sqrt()))
 }
 
 #[allow(clippy::too_many_arguments)]
