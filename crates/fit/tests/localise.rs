@@ -8,7 +8,7 @@ use fit::diagnose::localise::{
     ResidualRecord,
 };
 use fit::{Channel, FitError};
-use motor_model::{Effect, Effects, NoiseRng};
+use motor_model::{Effect, Effects, Input, NoiseRng};
 
 mod common;
 use common::localise_records::{Simulated, PRE_TRIGGER_S};
@@ -236,6 +236,66 @@ fn ljung_box_passes_white_and_flags_ar1_residuals() {
             }
         }
     }
+}
+
+/// A record that reverses: +6 V, −6 V, then off. Its phases name the reversal (from the new
+/// level until the speed is a fifth of the way to its new final value, with any sticking at
+/// Ω = 0 inside), the coast and the rest; on nominal data none of them is above the floor.
+#[test]
+fn reversing_record_has_reversal_coast_and_rest_phases() {
+    let input = Input::piecewise(&[(PRE_TRIGGER_S, 6.0), (1.0, -6.0), (2.0, 0.0)]).expect("input");
+    let sim = Simulated::driven("reversal", &input, Effects::none(), 9);
+    let loc = run(std::slice::from_ref(&sim));
+    let phases = &loc.records[0].phases;
+    let kinds: Vec<PhaseKind> = phases.iter().map(|p| p.kind).collect();
+    let reversal = phases
+        .iter()
+        .find(|p| p.kind == PhaseKind::Reversal)
+        .unwrap_or_else(|| panic!("no reversal in {kinds:?}"));
+    assert!((reversal.t_start_s - 1.0).abs() < 2e-3, "{reversal:?}");
+    // Through zero: the speed changes sign within the reversal (and sticking, if any).
+    let end = phases
+        .iter()
+        .skip_while(|p| p.kind != PhaseKind::Reversal)
+        .take_while(|p| matches!(p.kind, PhaseKind::Reversal | PhaseKind::Sticking))
+        .last()
+        .expect("reversal")
+        .end;
+    assert!(sim.speed[reversal.start] > 0.0 && sim.speed[end] < 0.0);
+    let after: Vec<PhaseKind> = phases
+        .iter()
+        .filter(|p| p.t_start_s >= 1.0)
+        .map(|p| p.kind)
+        .collect();
+    for kind in [PhaseKind::Steady, PhaseKind::Settling, PhaseKind::Rest] {
+        assert!(after.contains(&kind), "{kind:?} missing from {after:?}");
+    }
+    assert_eq!(
+        phases.last().map(|p| p.kind),
+        Some(PhaseKind::Rest),
+        "{kinds:?}"
+    );
+    let findings = loc.significant_findings();
+    assert!(findings.is_empty(), "{findings:?}");
+    // With Stribeck friction the coast ends early: a gap in time, not a ripple in angle.
+    let sim = Simulated::driven(
+        "reversal",
+        &input,
+        effects("stribeck_friction:tst=0.006,ws=5"),
+        9,
+    );
+    let loc = run(std::slice::from_ref(&sim));
+    let findings = loc.significant_findings();
+    assert!(findings.iter().any(|f| matches!(
+        f.what,
+        FindingKind::Window { t_start_s, .. } if t_start_s > 2.0
+    )));
+    assert!(
+        !findings
+            .iter()
+            .any(|f| matches!(f.what, FindingKind::AngleRipple { .. })),
+        "{findings:?}"
+    );
 }
 
 /// The result serialises as the `"where"` object of `motorid diagnose --json`.

@@ -114,7 +114,7 @@ const PEAK_FRACTION: f64 = 0.1;
 const RIPPLE_NYQUIST: f64 = 0.4;
 /// Revolutions its samples must travel for a harmonic to be fitted (ripple locked to the
 /// rotation repeats; a transient gap over part of a turn does not).
-const MIN_RIPPLE_REVOLUTIONS: f64 = 2.0;
+const MIN_RIPPLE_REVOLUTIONS: f64 = 8.0;
 /// Samples needed for the regression of one harmonic.
 const MIN_RIPPLE_SAMPLES: usize = 64;
 /// Half-width of the moving average of speed and current for the phases \[samples\].
@@ -410,7 +410,7 @@ pub struct AngleRipple {
     /// The best N \[periods per revolution\] (largest F).
     pub periods_per_rev: u32,
     /// Samples in its regression: those where N turns at most 0.4 cycles per sample (below
-    /// the Nyquist frequency with a margin); they must travel two revolutions.
+    /// the Nyquist frequency with a margin); they must travel eight revolutions.
     pub samples: usize,
     /// Amplitude `√(b² + c²)` (unit of the channel).
     pub amplitude: f64,

@@ -45,9 +45,8 @@ pub struct Simulated {
 
 /// The stick-slip simulator for data and model alike (the analytic step response of
 /// `simulate` differs from it by the integration error, which is not a gap).
-fn run(motor: &MotorParams, effects: Effects, volts: f64) -> Trace {
-    let input = Input::step(volts, PRE_TRIGGER_S).expect("step");
-    Simulator::new(*motor, effects, input)
+fn run(motor: &MotorParams, effects: Effects, input: &Input) -> Trace {
+    Simulator::new(*motor, effects, input.clone())
         .and_then(|s| s.run(DURATION_S, RATE_HZ))
         .expect("simulation")
 }
@@ -56,9 +55,15 @@ impl Simulated {
     /// A step of `volts` on the servo with `effects`, measured by the paper's logger (10-bit
     /// ADC, 1 LSB of noise, 2000-count encoder) with `seed`.
     pub fn step(name: &str, volts: f64, effects: Effects, seed: u64) -> Self {
+        let input = Input::step(volts, PRE_TRIGGER_S).expect("step");
+        Self::driven(name, &input, effects, seed)
+    }
+
+    /// `input` on the servo with `effects`, measured as [`Simulated::step`].
+    pub fn driven(name: &str, input: &Input, effects: Effects, seed: u64) -> Self {
         let motor = servo();
-        let truth = run(&motor, effects, volts);
-        let nominal = run(&motor, Effects::none(), volts);
+        let truth = run(&motor, effects, input);
+        let nominal = run(&motor, Effects::none(), input);
         let rec = MeasurementModel::paper_logger(&truth, seed)
             .apply(&truth)
             .expect("measurement");
