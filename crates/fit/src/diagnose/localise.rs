@@ -234,6 +234,8 @@ pub struct ExcessTest {
     pub samples: usize,
     /// Mean square residual over the mean floor variance, `Σ r²/Σ v` (1 = at the floor).
     pub ratio: f64,
+    /// The chi-square statistic `A/s` (`Σ r²/σ²` for white noise and a constant floor).
+    pub chi_square: f64,
     /// Effective degrees of freedom `ν`.
     pub dof: f64,
     /// `P(χ²_ν > A/s)`: the probability of so large a residual from the floor alone.
@@ -615,7 +617,9 @@ pub struct Finding {
     pub channel: Channel,
     /// What.
     pub what: FindingKind,
-    /// The statistic in words' number: the ratio over the floor, t, or the test statistic.
+    /// The test's number: the mean square over the floor (gap, phase, window, band), t
+    /// (trend), the PSD over the floor (peak), the Wald statistic (ripple), Q (whiteness) or
+    /// the largest correlation in standard errors (input).
     pub statistic: f64,
     /// Its p-value (adjusted where the test says so).
     pub p_value: f64,
@@ -1188,6 +1192,7 @@ fn excess_test((a, b, w): (f64, f64, f64), samples: usize, c: f64, alpha_test: f
         return ExcessTest {
             samples,
             ratio: f64::NAN,
+            chi_square: f64::NAN,
             dof: 0.0,
             p_value: 1.0,
             significant: false,
@@ -1195,10 +1200,12 @@ fn excess_test((a, b, w): (f64, f64, f64), samples: usize, c: f64, alpha_test: f
     }
     let nu = 2.0 * b * b / (c * w);
     let scale = c * w / (2.0 * b);
-    let p_value = chi_square_sf(a / scale, nu);
+    let chi_square = a / scale;
+    let p_value = chi_square_sf(chi_square, nu);
     ExcessTest {
         samples,
         ratio: a / b,
+        chi_square,
         dof: nu,
         p_value,
         significant: p_value < alpha_test,

@@ -7,7 +7,8 @@
 use fit::diagnose::localise::{ResidualChannel, ResidualRecord};
 use fit::Channel;
 use motor_model::{
-    central_difference, Effects, Input, MeasurementModel, MotorParams, Simulator, Trace,
+    central_difference, Effects, Input, MeasurementModel, MotorParams, Simulator, SpeedSource,
+    Trace,
 };
 
 /// Sample rate \[Hz\].
@@ -33,14 +34,17 @@ pub struct Simulated {
     pub voltage: Vec<f64>,
     /// Measured current \[A\].
     pub current: Vec<f64>,
-    /// Encoder speed \[rad/s\].
+    /// Speed \[rad/s\] (encoder or tachometer).
     pub speed: Vec<f64>,
     /// Encoder angle \[rad\].
     pub angle: Vec<f64>,
     /// Model current \[A\].
     pub model_current: Vec<f64>,
-    /// Model encoder speed (central difference of the model's angle) \[rad/s\].
+    /// Model speed: the central difference of the model's angle for an encoder speed
+    /// \[rad/s\].
     pub model_speed: Vec<f64>,
+    /// The speed channel's kind.
+    pub speed_kind: Channel,
 }
 
 /// The stick-slip simulator for data and model alike (the analytic step response of
@@ -61,12 +65,26 @@ impl Simulated {
 
     /// `input` on the servo with `effects`, measured as [`Simulated::step`].
     pub fn driven(name: &str, input: &Input, effects: Effects, seed: u64) -> Self {
+        Self::measured_by(name, input, effects, |t| {
+            MeasurementModel::paper_logger(t, seed)
+        })
+    }
+
+    /// `input` on the servo with `effects`, measured by the chain `logger` makes for the
+    /// trace; a tachometer speed is the channel [`Channel::Speed`], an encoder speed
+    /// [`Channel::EncoderSpeed`].
+    pub fn measured_by(
+        name: &str,
+        input: &Input,
+        effects: Effects,
+        logger: impl Fn(&Trace) -> MeasurementModel,
+    ) -> Self {
         let motor = servo();
         let truth = run(&motor, effects, input);
         let nominal = run(&motor, Effects::none(), input);
-        let rec = MeasurementModel::paper_logger(&truth, seed)
-            .apply(&truth)
-            .expect("measurement");
+        let chain = logger(&truth);
+        let rec = chain.apply(&truth).expect("measurement");
+        let tacho = chain.speed_source == SpeedSource::Tacho;
         Simulated {
             name: name.to_string(),
             dt: 1.0 / RATE_HZ,
@@ -75,11 +93,20 @@ impl Simulated {
             speed: rec.speed.expect("encoder speed"),
             angle: rec.position.expect("angle"),
             model_current: nominal.current,
-            model_speed: central_difference(&nominal.t, &nominal.position),
+            model_speed: if tacho {
+                nominal.speed
+            } else {
+                central_difference(&nominal.t, &nominal.position)
+            },
+            speed_kind: if tacho {
+                Channel::Speed
+            } else {
+                Channel::EncoderSpeed
+            },
         }
     }
 
-    /// The record for [`fit::diagnose::localise::localise`]: current and encoder speed.
+    /// The record for [`fit::diagnose::localise::localise`]: current and speed.
     pub fn record(&self) -> ResidualRecord<'_> {
         ResidualRecord {
             name: &self.name,
@@ -95,7 +122,7 @@ impl Simulated {
                     model: &self.model_current,
                 },
                 ResidualChannel {
-                    kind: Channel::EncoderSpeed,
+                    kind: self.speed_kind,
                     measured: &self.speed,
                     model: &self.model_speed,
                 },
