@@ -67,7 +67,9 @@ impl VoltageScale {
     }
 }
 
-fn detect_quantum(values: &[f64]) -> Option<f64> {
+/// The quantum (one step) of a quantised column: see [`VoltageScale::of`]; `None` when the column
+/// does not show one.
+pub(crate) fn detect_quantum(values: &[f64]) -> Option<f64> {
     let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
     v.sort_by(f64::total_cmp);
     v.dedup();

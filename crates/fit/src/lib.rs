@@ -9,6 +9,9 @@
 //!   levels and instants as measured inputs whose uncertainty enters the intervals
 //!   ([`estimate_level`], [`StepInputs`], [`LevelPrior`]).
 //!
+//! - [`diagnose`]: the sim-to-real diagnosis; [`diagnose::localise`] says where a model still
+//!   disagrees with the records, against the records' own noise floor.
+//!
 //! It does no I/O: records come in as slices, results go out as values.
 //!
 //! ```
@@ -29,6 +32,7 @@
 
 mod checks;
 mod clipping;
+pub mod diagnose;
 mod error;
 mod feedforward;
 mod full_model;

@@ -1,0 +1,17 @@
+//! Sim-to-real diagnosis: where an identified model still disagrees with the records, which
+//! unmodelled effect (SPEC section 5) causes it, and how far the gap shrinks once that effect is
+//! modelled.
+//!
+//! The diagnosis lives here, in the library, so that control software can run it on its own
+//! records; `motorid diagnose` only loads the records, calls it and prints.
+//!
+//! - [`localise`]: *where* — the residual of a model on every record and channel against the
+//!   noise floor estimated from the records themselves, located in time (phases of each record,
+//!   the windows of largest excess), in operating region (speed and current bands, trends), in
+//!   frequency and shaft angle, with the whiteness and input cross-correlation of MATLAB's
+//!   `resid`. Each part carries a test that separates a real gap from noise.
+//!
+//! Like the rest of the crate it does no I/O: records come in as slices, results go out as
+//! values (serialisable with `serde`).
+
+pub mod localise;
