@@ -43,7 +43,9 @@ pub struct MeasurementSpec {
     pub adc_bits: u8,
     /// Sample rate \[Hz\].
     pub rate_hz: f64,
-    /// Samples recorded at 0 V before each step or waveform starts \[-\].
+    /// Samples recorded at 0 V before each step or waveform starts \[-\] (the step falls
+    /// between the last of them and the next sample: the logger's clock is not synchronised
+    /// with it).
     pub pre_trigger_samples: usize,
     /// Noise on the analog channels.
     pub noise: NoiseSpec,

@@ -141,9 +141,9 @@ pub enum PlantEffect {
         /// Ratio r = L(∞)/L0 \[-\], in (0, 1].
         min_ratio: f64,
     },
-    /// `inductance_saturation` (b): the incremental inductance of a tanh flux curve,
-    /// `ψ(I) = L0 [r I + (1 − r) I_sat tanh(I/I_sat)]`, `L(I) = dψ/dI = L0 [r + (1 − r) sech²(I/I_sat)]`.
-    SaturationTanhFlux {
+    /// `inductance_saturation` (b): an inductance falling from `I = 0` on, linearly in `|I|` at
+    /// first, `L(I) = L0 (r + (1 − r)/(1 + |I|/I_sat))` \[H\] (the (a) form is flat at 0).
+    SaturationAbsolute {
         /// Saturation current I_sat \[A\].
         saturation_current_a: f64,
         /// Ratio r = L(∞)/L0 \[-\], in (0, 1].
@@ -191,7 +191,7 @@ impl PlantEffect {
                 "quadratic_drag"
             }
             PlantEffect::BrushClamp { .. } | PlantEffect::BrushLogarithmic { .. } => "brush_drop",
-            PlantEffect::SaturationLorentzian { .. } | PlantEffect::SaturationTanhFlux { .. } => {
+            PlantEffect::SaturationLorentzian { .. } | PlantEffect::SaturationAbsolute { .. } => {
                 "inductance_saturation"
             }
         }
@@ -233,7 +233,7 @@ impl PlantEffect {
             PlantEffect::BrushClamp { .. } => "clamp knee".into(),
             PlantEffect::BrushLogarithmic { .. } => "logarithmic".into(),
             PlantEffect::SaturationLorentzian { .. } => "lorentzian L(I)".into(),
-            PlantEffect::SaturationTanhFlux { .. } => "tanh flux".into(),
+            PlantEffect::SaturationAbsolute { .. } => "1/(1+|I|/Isat)".into(),
         }
     }
 
@@ -272,7 +272,7 @@ impl PlantEffect {
             PlantEffect::BrushClamp { drop_v, .. }
             | PlantEffect::BrushLogarithmic { drop_v, .. } => m("Vb", drop_v, "V"),
             PlantEffect::SaturationLorentzian { min_ratio, .. }
-            | PlantEffect::SaturationTanhFlux { min_ratio, .. } => m("1 - r", 1.0 - min_ratio, "-"),
+            | PlantEffect::SaturationAbsolute { min_ratio, .. } => m("1 - r", 1.0 - min_ratio, "-"),
         }
     }
 
@@ -321,7 +321,7 @@ impl PlantEffect {
             PlantEffect::BrushClamp { drop_v, .. }
             | PlantEffect::BrushLogarithmic { drop_v, .. } => *drop_v *= factor,
             PlantEffect::SaturationLorentzian { min_ratio, .. }
-            | PlantEffect::SaturationTanhFlux { min_ratio, .. } => {
+            | PlantEffect::SaturationAbsolute { min_ratio, .. } => {
                 *min_ratio = 1.0 - ((1.0 - *min_ratio) * factor).min(MAX_INDUCTANCE_FALL)
             }
         }
@@ -453,7 +453,7 @@ impl PlantEffect {
                 saturation_current_a,
                 min_ratio,
             }
-            | PlantEffect::SaturationTanhFlux {
+            | PlantEffect::SaturationAbsolute {
                 saturation_current_a,
                 min_ratio,
             } => {

@@ -32,22 +32,23 @@
 //!
 //! | effect | (a) same shape (SPEC section 5) | (b) other shape |
 //! |---|---|---|
-//! | `stribeck_friction` | `T_c = Ts + (Tst − Ts) exp(−(Ω/Ωs)²)`, breakaway at Tst | LuGre: `ż = Ω − σ0 |Ω| z/g(Ω)`, `g = Ts + (Tst − Ts) exp(−|Ω/Ωs|^δ)`, δ ∈ {0.5, 1}, `T_f = σ0 z + σ1 ż` (σ2 = f) |
+//! | `stribeck_friction` | `T_c = Ts + (Tst − Ts) exp(−(Ω/Ωs)²)`, breakaway at Tst | LuGre: `ż = Ω − σ0 |Ω| z/g(Ω)`, `g = Ts + (Tst − Ts) exp(−|Ω/Ωs|^δ)`, δ = 0.5 (presliding 1–4 mrad), `T_f = σ0 z + σ1 ż` (σ2 = f) |
 //! | `cogging_torque` | `A sin(Nθ + φ)` | `A [sin(Nθ + φ) + a2 sin(2Nθ + φ2) + a3 sin(3Nθ + φ3)]` |
 //! | `current_sensor_lag` | `τf İs = I − Is` | critically damped: `Ïs + 2ωc İs + ωc² Is = ωc² I` |
 //! | `thermal_drift` | `Cth dT/dt = I²R − T/Rth`, `R = R0 (1 + αT)` | two nodes: `Cw dTw/dt = I²R − (Tw − Th)/Rwh`, `Ch dTh/dt = (Tw − Th)/Rwh − Th/Rha`, `R = R0 (1 + α Tw)` |
 //! | `quadratic_drag` | `c Ω|Ω|` | `c |Ω|^1.5 sign Ω` |
 //! | `brush_drop` | `Vb clamp(I/I_knee, −1, 1)` | `Vb ln(1 + |I|/I0) sign I` |
-//! | `inductance_saturation` | `L0 (r + (1 − r)/(1 + (I/I_sat)²))` | `L = dψ/dI` of `ψ = L0 [r I + (1 − r) I_sat tanh(I/I_sat)]`, i.e. `L0 (r + (1 − r) sech²(I/I_sat))` |
+//! | `inductance_saturation` | `L0 (r + (1 − r)/(1 + (I/I_sat)²))` | `L0 (r + (1 − r)/(1 + |I|/I_sat))`, falling linearly from I = 0 |
 //!
 //! α is copper's 0.00393 1/K.
 //!
 //! # Integration
 //!
-//! Classical RK4 with a step of at most 1/5 of the fastest time constant (the motor's fast mode,
+//! Classical RK4 with a step of at most 1/8 of the fastest time constant (the motor's fast mode,
 //! the stuck electrical pole `(R + dV_b/dI)/L_min`, the winding node, the detent well
 //! `√(max dT_cog/dθ / J)`, the bristle `√(σ0/J)`), and at most 1/24 of the period of the
-//! highest cogging harmonic at the present speed. The current sensor, a one-way filter of I
+//! highest cogging harmonic at the present speed; below 3 Ωs of speed with Stribeck or LuGre
+//! friction a step changes the speed by at most Ωs/10. The current sensor, a one-way filter of I
 //! that may be much faster than the plant, is sub-cycled by RK4 inside each step on the cubic
 //! Hermite interpolant of I(t) (ends and slopes from the plant), 5 sub-steps per time constant. Steps end on every sample and on every jump of
 //! E(t). A stick/slip event inside a step (stuck: `|k I − T_cog| − Tst` turning positive;
@@ -61,7 +62,7 @@
 //! and a tachometer, then [`crate::MeasurementModel`]: an 8–14-bit ADC over ranges set from the
 //! nominal motor's signals with 20 % headroom, and either an encoder of 100–5000 counts per
 //! revolution (speed by central differences) or a noisy tachometer (no angle). Sample rates
-//! 1–5 kHz; 0–50 pre-trigger samples at 0 V.
+//! 1–5 kHz; 1–50 pre-trigger samples at 0 V, the step falling between two samples.
 //!
 //! # The cases
 //!
