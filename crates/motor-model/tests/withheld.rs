@@ -2,8 +2,8 @@
 //! the candidate simulator and the exact response, and the (b) forms' difference in shape.
 
 use motor_model::withheld::{
-    benchmark_case, benchmark_cases, generate, simulate_plant, visibility, CaseSpec, Form,
-    PlantEffect, WITHHELD_EFFECT_NAMES,
+    benchmark_case, benchmark_cases, generate, simulate_plant, visibility, CaseSpec, Form, Plant,
+    PlantEffect, RecordRole, WITHHELD_EFFECT_NAMES,
 };
 use motor_model::{simulate, Effect, Effects, Input, MotorParams, StepResponse, Trace};
 
@@ -252,6 +252,43 @@ fn nominal_plant_matches_the_exact_step_response() {
         ] {
             let gap = relative_gap(a, b);
             assert!(gap <= 1e-6, "{volts} V, {name}: {gap:.2e} of the peak");
+        }
+    }
+}
+
+/// The generator's step rule is converged for every effect in both forms: with steps four
+/// times shorter, the high-step and reversal records change by less than 2 % of a noise floor
+/// RMS (the (b) forms have no other reference).
+#[test]
+fn plant_steps_are_converged_below_the_noise() {
+    for case in one_case_per_effect_and_form(112) {
+        let effects = case.plant_effects();
+        let floors = case.floors();
+        for (spec, floor) in case.records.iter().zip(&floors) {
+            if !matches!(spec.role, RecordRole::HighStep | RecordRole::Reversal) {
+                continue;
+            }
+            let rate = case.measurement.rate_hz;
+            let plant = Plant::new(case.motor, &effects, spec.input.clone()).unwrap();
+            let h = plant.max_step_s();
+            let coarse = plant.run(spec.duration_s, rate).unwrap();
+            let fine = Plant::new(case.motor, &effects, spec.input.clone())
+                .unwrap()
+                .with_max_step(h / 4.0)
+                .unwrap()
+                .run(spec.duration_s, rate)
+                .unwrap();
+            let change = visibility(
+                std::slice::from_ref(&coarse),
+                std::slice::from_ref(&fine),
+                std::slice::from_ref(floor),
+            );
+            assert!(
+                change < 0.02,
+                "{} {:?}: {change:.3} noise floors from a 4x finer step",
+                effects[0].form_label(),
+                spec.role
+            );
         }
     }
 }

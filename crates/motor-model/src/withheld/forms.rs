@@ -142,7 +142,8 @@ pub enum PlantEffect {
         min_ratio: f64,
     },
     /// `inductance_saturation` (b): an inductance falling from `I = 0` on, linearly in `|I|` at
-    /// first, `L(I) = L0 (r + (1 − r)/(1 + |I|/I_sat))` \[H\] (the (a) form is flat at 0).
+    /// first, `L(I) = L0 (r + (1 − r)/(1 + |I|ε/I_sat))` \[H\] (the (a) form is flat at 0), with
+    /// `|I|ε = √(I² + ε²) − ε`, ε = 0.02 I_sat, rounding the cusp at zero.
     SaturationAbsolute {
         /// Saturation current I_sat \[A\].
         saturation_current_a: f64,
@@ -278,7 +279,7 @@ impl PlantEffect {
 
     /// The same effect with its magnitude multiplied by `factor` > 0 (the shape parameters
     /// kept): Tst − Ts, A, the sensor delay, the heating rate 1/C (thermal time constants
-    /// kept), c, Vb, and 1 − r (capped at 0.95).
+    /// kept), c, Vb, and 1 − r (capped at 0.8).
     pub fn scaled(&self, factor: f64, motor: &MotorParams) -> Self {
         let mut e = *self;
         match &mut e {
@@ -465,7 +466,7 @@ impl PlantEffect {
 }
 
 /// Largest fall of the inductance, `1 − r`, the scaling allows \[-\].
-const MAX_INDUCTANCE_FALL: f64 = 0.95;
+const MAX_INDUCTANCE_FALL: f64 = 0.8;
 
 fn static_at_least_ts(static_torque_nm: f64, motor: &MotorParams) -> Result<(), ModelError> {
     if static_torque_nm.is_finite() && static_torque_nm >= motor.ts_nm {

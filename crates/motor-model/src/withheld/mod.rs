@@ -38,7 +38,7 @@
 //! | `thermal_drift` | `Cth dT/dt = I²R − T/Rth`, `R = R0 (1 + αT)` | two nodes: `Cw dTw/dt = I²R − (Tw − Th)/Rwh`, `Ch dTh/dt = (Tw − Th)/Rwh − Th/Rha`, `R = R0 (1 + α Tw)` |
 //! | `quadratic_drag` | `c Ω|Ω|` | `c |Ω|^1.5 sign Ω` |
 //! | `brush_drop` | `Vb clamp(I/I_knee, −1, 1)` | `Vb ln(1 + |I|/I0) sign I` |
-//! | `inductance_saturation` | `L0 (r + (1 − r)/(1 + (I/I_sat)²))` | `L0 (r + (1 − r)/(1 + |I|/I_sat))`, falling linearly from I = 0 |
+//! | `inductance_saturation` | `L0 (r + (1 − r)/(1 + (I/I_sat)²))` | `L0 (r + (1 − r)/(1 + |I|ε/I_sat))`, falling linearly from I = 0 (`|I|ε = √(I² + ε²) − ε`, ε = 0.02 I_sat) |
 //!
 //! α is copper's 0.00393 1/K.
 //!
@@ -47,7 +47,10 @@
 //! Classical RK4 with a step of at most 1/8 of the fastest time constant (the motor's fast mode,
 //! the stuck electrical pole `(R + dV_b/dI)/L_min`, the winding node, the detent well
 //! `√(max dT_cog/dθ / J)`, the bristle `√(σ0/J)`), and at most 1/24 of the period of the
-//! highest cogging harmonic at the present speed; below 3 Ωs of speed with Stribeck or LuGre
+//! highest cogging harmonic at the present speed. Twelve time constants of the fast mode after
+//! a jump of E(t) or a stick/slip event, when that mode has decayed to e⁻¹², the electrical
+//! part of the limit is relaxed threefold (`h λ = 3/8`, well inside RK4's stability bound).
+//! Below 3 Ωs of speed with Stribeck or LuGre
 //! friction a step changes the speed by at most Ωs/10. The current sensor, a one-way filter of I
 //! that may be much faster than the plant, is sub-cycled by RK4 inside each step on the cubic
 //! Hermite interpolant of I(t) (ends and slopes from the plant), 5 sub-steps per time constant. Steps end on every sample and on every jump of
@@ -99,4 +102,6 @@ pub use chain::{
     ChannelRanges, ColouredNoise, MeasurementSpec, NoiseFloors, NoiseSpec, SpeedSensor,
 };
 pub use forms::{Form, Magnitude, PlantEffect, WITHHELD_EFFECT_NAMES};
-pub use plant::{simulate_plant, Plant, MAX_PLANT_SAMPLES, STEPS_PER_FASTEST_TIME_CONSTANT};
+pub use plant::{
+    simulate_plant, Plant, MAX_PLANT_SAMPLES, SATURATION_ROUNDING, STEPS_PER_FASTEST_TIME_CONSTANT,
+};

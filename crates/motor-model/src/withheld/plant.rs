@@ -15,6 +15,15 @@ use crate::sim::simulator::Trace;
 /// that mode is `(hλ)⁵/120 ≈ 3e-7` of its amplitude, and it dies out within a few steps; the
 /// nominal step response comes out within 1e-6 of the exact one).
 pub const STEPS_PER_FASTEST_TIME_CONSTANT: f64 = 8.0;
+/// Once the fast electrical mode excited by a jump or an event has decayed for
+/// `FINE_WINDOW_TIME_CONSTANTS` of its time constants (to e⁻¹² ≈ 6e-6), the electrical part of
+/// the step limit is relaxed by `SETTLED_STEP_FACTOR` (`h λ = 3/8`, well inside RK4's stability
+/// bound of 2.78; the per-step error on what is left of the mode is below 1e-9 of the jump).
+const FINE_WINDOW_TIME_CONSTANTS: f64 = 12.0;
+/// Width over which the (b) inductance form rounds `|I|` at zero, in units of I_sat \[-\].
+pub const SATURATION_ROUNDING: f64 = 0.02;
+/// See [`FINE_WINDOW_TIME_CONSTANTS`].
+const SETTLED_STEP_FACTOR: f64 = 3.0;
 /// RK4 steps per period of the highest cogging harmonic at the present speed.
 /// Below `STRIBECK_ZONE` Ωs of speed, a step changes the speed by at most
 /// `STRIBECK_STEP_FRACTION` Ωs (the friction falls from Tst to Ts across Ωs).
@@ -76,7 +85,12 @@ pub struct Plant {
     motor: MotorParams,
     slots: Slots,
     input: Input,
+    /// Longest step while the electrical transient of a jump or an event is alive \[s\].
     h_max: f64,
+    /// Longest step once it has died out \[s\].
+    h_settled: f64,
+    /// How long the fine step is kept after a jump or an event \[s\].
+    settle_s: f64,
 }
 
 impl Plant {
@@ -112,18 +126,27 @@ impl Plant {
             slots,
             input,
             h_max: 0.0,
+            h_settled: 0.0,
+            settle_s: 0.0,
         };
-        plant.h_max = 1.0 / (plant.fastest_rate() * STEPS_PER_FASTEST_TIME_CONSTANT);
+        let (electrical, other, decay) = plant.rates_of_modes();
+        let h_other = 1.0 / (other * STEPS_PER_FASTEST_TIME_CONSTANT);
+        let h_electrical = 1.0 / (electrical * STEPS_PER_FASTEST_TIME_CONSTANT);
+        plant.h_max = h_electrical.min(h_other);
+        plant.h_settled = (SETTLED_STEP_FACTOR * h_electrical).min(h_other);
+        plant.settle_s = FINE_WINDOW_TIME_CONSTANTS / decay;
         Ok(plant)
     }
 
     /// The same plant with its RK4 step at most `h_s` \[s\] (for convergence checks).
     pub fn with_max_step(mut self, h_s: f64) -> Result<Self, ModelError> {
-        self.h_max = self.h_max.min(positive("plant step", h_s)?);
+        let h_s = positive("plant step", h_s)?;
+        self.h_max = self.h_max.min(h_s);
+        self.h_settled = self.h_settled.min(h_s);
         Ok(self)
     }
 
-    /// The longest RK4 step \[s\].
+    /// The longest RK4 step \[s\] (while a transient is alive; 3 times longer after).
     pub fn max_step_s(&self) -> f64 {
         self.h_max
     }
@@ -160,14 +183,16 @@ impl Plant {
             Phase::Stuck
         };
         let mut t = 0.0;
+        let mut excited_at = 0.0;
         for j in 0..n {
             let t_j = j as f64 * dt;
             while let Some(jump) = self.input.next_jump_after(t).filter(|&tj| tj < t_j) {
-                self.advance(&mut x, &mut phase, t, jump)?;
+                self.advance(&mut x, &mut phase, t, jump, &mut excited_at)?;
                 t = jump;
+                excited_at = jump;
             }
             if t_j > t {
-                self.advance(&mut x, &mut phase, t, t_j)?;
+                self.advance(&mut x, &mut phase, t, t_j, &mut excited_at)?;
                 t = t_j;
             }
             out.t.push(t_j);
@@ -185,15 +210,18 @@ impl Plant {
         Ok(out)
     }
 
-    /// The fastest rate of the plant \[1/s\], from the motor's modes and the effects' own.
-    fn fastest_rate(&self) -> f64 {
+    /// The fastest rates of the plant \[1/s\]: of the electrical modes (the motor's, the stuck
+    /// pole with the brush film and the smallest inductance), of the effects' own dynamics, and
+    /// the decay rate of the motor's fast mode.
+    fn rates_of_modes(&self) -> (f64, f64, f64) {
         let p = &self.motor;
         let d = Derived::new(p);
-        let moving = if d.omega_a > 0.0 && d.zeta > 1.0 {
-            d.sigma + d.omega_a
+        let (moving, decay) = if d.omega_a > 0.0 && d.zeta > 1.0 {
+            (d.sigma + d.omega_a, d.sigma + d.omega_a)
         } else {
-            d.omega_n.max(d.sigma)
+            (d.omega_n.max(d.sigma), d.sigma)
         };
+        let decay = decay.min(p.r_ohm / p.l_henry);
         let l_min = match self.slots.saturation {
             Some(PlantEffect::SaturationLorentzian { min_ratio, .. })
             | Some(PlantEffect::SaturationAbsolute { min_ratio, .. }) => p.l_henry * min_ratio,
@@ -210,7 +238,8 @@ impl Plant {
             }) => drop_v / onset_current_a,
             _ => 0.0,
         };
-        let mut rate = (moving * p.l_henry / l_min).max((p.r_ohm + brush_slope) / l_min);
+        let electrical = (moving * p.l_henry / l_min).max((p.r_ohm + brush_slope) / l_min);
+        let mut rate = f64::MIN_POSITIVE;
         if let Some(PlantEffect::ThermalTwoNode {
             winding_capacity_j_per_k,
             winding_to_housing_k_per_w,
@@ -233,7 +262,7 @@ impl Plant {
                 .max((bristle_stiffness_nm_per_rad / p.j_kgm2).sqrt())
                 .max(bristle_damping_nms_per_rad / p.j_kgm2);
         }
-        rate
+        (electrical, rate, decay)
     }
 
     /// Integrates from `t0` to `t1` in sub-steps no longer than the plant allows at the
@@ -244,6 +273,7 @@ impl Plant {
         phase: &mut Phase,
         t0: f64,
         t1: f64,
+        excited_at: &mut f64,
     ) -> Result<(), ModelError> {
         let mut t = t0;
         for _ in 0..MAX_SUBSTEPS_PER_SAMPLE {
@@ -251,10 +281,12 @@ impl Plant {
             if left <= 0.0 {
                 return Ok(());
             }
-            let h_allowed = self.step_limit(x);
+            let h_allowed = self.step_limit(x, t - *excited_at);
             let pieces = (left / h_allowed).ceil().max(1.0);
             let h = left / pieces;
-            self.step(x, phase, t, h);
+            if let Some(t_event) = self.step(x, phase, t, h) {
+                *excited_at = t_event;
+            }
             t = if pieces <= 1.0 { t1 } else { t + h };
         }
         Err(ModelError::InvalidSetting {
@@ -264,10 +296,15 @@ impl Plant {
         })
     }
 
-    /// The longest step at the present state \[s\]: `h_max`, and a fraction of a cogging period
-    /// at the present speed.
-    fn step_limit(&self, x: &State) -> f64 {
-        let mut h = self.h_max;
+    /// The longest step at the present state \[s\], `since_s` \[s\] after the last jump or
+    /// event: the fine or the settled step, a fraction of Ωs in the Stribeck zone, a fraction
+    /// of a cogging period at the present speed.
+    fn step_limit(&self, x: &State, since_s: f64) -> f64 {
+        let mut h = if since_s < self.settle_s {
+            self.h_max
+        } else {
+            self.h_settled
+        };
         let stribeck = match self.slots.friction {
             Some(PlantEffect::StribeckGaussian {
                 static_torque_nm,
@@ -306,23 +343,25 @@ impl Plant {
         h
     }
 
-    /// One step of length `h` from `t`, with the stick/slip events inside it.
-    fn step(&self, x: &mut State, phase: &mut Phase, t: f64, h: f64) {
+    /// One step of length `h` from `t`, with the stick/slip events inside it; returns the
+    /// instant of the last event, if any.
+    fn step(&self, x: &mut State, phase: &mut Phase, t: f64, h: f64) -> Option<f64> {
         if *phase == Phase::Bristle {
             let equilibrium = self.bristle_in_equilibrium(x, h);
             *x = self.rk4_sensed(x, *phase, equilibrium, t, h);
             if equilibrium {
                 x[Z] = self.bristle_sliding_deflection(x[W]);
             }
-            return;
+            return None;
         }
         let mut t = t;
         let mut left = h;
+        let mut event = None;
         for _ in 0..MAX_EVENTS_PER_STEP {
             let end = self.rk4(x, *phase, false, t, left);
             if self.event_value(&end, *phase) <= 0.0 {
                 *x = self.with_sensor(x, &end, *phase, t, left);
-                return;
+                return event;
             }
             let s = self.locate_event(x, *phase, t, left);
             let at = self.rk4(x, *phase, false, t, s * left);
@@ -331,12 +370,14 @@ impl Plant {
             *phase = self.phase_at_rest(&at);
             *x = at;
             t += s * left;
+            event = Some(t);
             left *= 1.0 - s;
             if left <= 0.0 {
-                return;
+                return event;
             }
         }
         *x = self.rk4_sensed(x, *phase, false, t, left);
+        event
     }
 
     /// The event function: positive once the phase must change. Stuck: `|τ_rest| − Tst`;
@@ -595,7 +636,12 @@ impl Plant {
                 saturation_current_a,
                 min_ratio,
             }) => {
-                p.l_henry * (min_ratio + (1.0 - min_ratio) / (1.0 + i.abs() / saturation_current_a))
+                // |I| rounded over ROUNDING Isat: a kink at I = 0 would cost RK4 its order at
+                // every reversal.
+                let knee = SATURATION_ROUNDING * saturation_current_a;
+                let magnitude = (i * i + knee * knee).sqrt() - knee;
+                p.l_henry
+                    * (min_ratio + (1.0 - min_ratio) / (1.0 + magnitude / saturation_current_a))
             }
             _ => p.l_henry,
         };
