@@ -10,6 +10,9 @@ use std::time::Instant;
 
 use motor_model::withheld::{benchmark_case, generate, CaseSpec, Form, SpeedSensor};
 
+/// A built case with its total number of samples, or why it could not be built.
+type Built = Result<(CaseSpec, usize), String>;
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let seed: u64 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(1);
@@ -19,7 +22,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let start = Instant::now();
     // Cases are independent: build and generate them on every core, each thread taking every
     // `threads`-th case.
-    let mut results: Vec<(usize, Result<(CaseSpec, usize), String>)> = std::thread::scope(|s| {
+    let mut results: Vec<(usize, Built)> = std::thread::scope(|s| {
         let workers: Vec<_> = (0..threads)
             .map(|w| {
                 s.spawn(move || {

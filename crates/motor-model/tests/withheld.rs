@@ -2,8 +2,8 @@
 //! the candidate simulator and the exact response, and the (b) forms' difference in shape.
 
 use motor_model::withheld::{
-    benchmark_case, benchmark_cases, generate, simulate_plant, visibility, CaseSpec, Form, Plant,
-    PlantEffect, RecordRole, WITHHELD_EFFECT_NAMES,
+    benchmark_case, benchmark_cases, case_mix, generate, simulate_plant, visibility,
+    withheld_effect_names, CaseSpec, Form, Plant, PlantEffect, RecordRole,
 };
 use motor_model::{simulate, Effect, Effects, Input, MotorParams, StepResponse, Trace};
 
@@ -56,18 +56,21 @@ fn relative_gap(a: &[f64], b: &[f64]) -> f64 {
     worst / scale
 }
 
-/// The single-effect cases of the first `n` of the benchmark, one per effect and form.
+/// One single-effect case per effect and form from the `n` cases of the benchmark (found in
+/// the mix, then built alone).
 fn one_case_per_effect_and_form(n: usize) -> Vec<CaseSpec> {
-    let cases = benchmark_cases(SEED, n).unwrap();
-    let mut picked: Vec<CaseSpec> = Vec::new();
-    for name in WITHHELD_EFFECT_NAMES {
+    let mix = case_mix(SEED, n);
+    let mut picked = Vec::new();
+    for name in withheld_effect_names() {
         for form in [Form::SameShape, Form::OtherShape] {
-            let found = cases.iter().find(|c| {
-                c.effects.len() == 1
-                    && c.effects[0].effect.name() == name
-                    && c.effects[0].effect.form() == form
-            });
-            picked.push(found.expect("every effect in both forms").clone());
+            let index = mix
+                .iter()
+                .position(|m| m.as_slice() == [(name, form)])
+                .expect("every effect in both forms");
+            let case = benchmark_case(SEED, index, n).unwrap();
+            assert_eq!(case.truth(), vec![name]);
+            assert_eq!(case.effects[0].effect.form(), form);
+            picked.push(case);
         }
     }
     picked
@@ -86,7 +89,7 @@ fn a_160_case_benchmark_has_the_required_mix() {
     for pair in &pairs {
         assert_ne!(pair.effects[0].effect.name(), pair.effects[1].effect.name());
     }
-    for name in WITHHELD_EFFECT_NAMES {
+    for name in withheld_effect_names() {
         let single = cases.iter().filter(|c| c.truth() == vec![name]).count();
         assert!(single >= 15, "{name}: {single} single-effect cases");
     }

@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::chain::{ChannelRanges, MeasurementSpec, NoiseFloors, NoiseSpec, SpeedSensor};
-use super::forms::{Form, PlantEffect, WITHHELD_EFFECT_NAMES};
+use super::forms::{withheld_effect_names, Form, PlantEffect};
 use super::plant::simulate_plant;
 use crate::derived::Derived;
 use crate::error::ModelError;
@@ -192,7 +192,9 @@ pub fn case_mix(seed: u64, n: usize) -> Vec<Vec<(&'static str, Form)>> {
     let n_none = n / 8;
     let n_pairs = n / 8;
     let n_single = n - n_none - n_pairs;
-    let k = WITHHELD_EFFECT_NAMES.len();
+    let names = withheld_effect_names();
+    let k = names.len().max(1);
+    let name = |j: usize| names.get(j % k).copied().unwrap_or("none");
     let form = |occurrence: usize| {
         if occurrence % 2 == 1 {
             Form::OtherShape
@@ -201,15 +203,12 @@ pub fn case_mix(seed: u64, n: usize) -> Vec<Vec<(&'static str, Form)>> {
         }
     };
     let mut mix: Vec<Vec<(&'static str, Form)>> = Vec::with_capacity(n);
-    mix.extend((0..n_single).map(|j| vec![(WITHHELD_EFFECT_NAMES[j % k], form(j / k))]));
+    mix.extend((0..n_single).map(|j| vec![(name(j), form(j / k))]));
     mix.extend((0..n_none).map(|_| Vec::new()));
     mix.extend((0..n_pairs).map(|p| {
         let first = p % k;
-        let second = (first + 1 + (p / k) % (k - 1)) % k;
-        vec![
-            (WITHHELD_EFFECT_NAMES[first], form(p + 1)),
-            (WITHHELD_EFFECT_NAMES[second], form(p)),
-        ]
+        let second = (first + 1 + (p / k) % (k - 1).max(1)) % k;
+        vec![(name(first), form(p + 1)), (name(second), form(p))]
     }));
     let mut rng = NoiseRng::new(seed ^ 0x5EED_CA5E);
     for j in (1..mix.len()).rev() {

@@ -152,16 +152,15 @@ pub enum PlantEffect {
     },
 }
 
-/// The SPEC section 5 names of the seven effects, in the order of the benchmark's case mix.
-pub const WITHHELD_EFFECT_NAMES: [&str; 7] = [
-    "stribeck_friction",
-    "cogging_torque",
-    "current_sensor_lag",
-    "thermal_drift",
-    "quadratic_drag",
-    "brush_drop",
-    "inductance_saturation",
-];
+/// The SPEC section 5 names of the seven effects ([`crate::EFFECT_NAMES`] without `none`), in
+/// the order of the benchmark's case mix.
+pub fn withheld_effect_names() -> Vec<&'static str> {
+    crate::EFFECT_NAMES
+        .iter()
+        .copied()
+        .filter(|name| *name != "none")
+        .collect()
+}
 
 /// The size of an effect, as the case table prints it.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]

@@ -101,7 +101,7 @@ pub use cases::{
 pub use chain::{
     ChannelRanges, ColouredNoise, MeasurementSpec, NoiseFloors, NoiseSpec, SpeedSensor,
 };
-pub use forms::{Form, Magnitude, PlantEffect, WITHHELD_EFFECT_NAMES};
+pub use forms::{withheld_effect_names, Form, Magnitude, PlantEffect};
 pub use plant::{
     simulate_plant, Plant, MAX_PLANT_SAMPLES, SATURATION_ROUNDING, STEPS_PER_FASTEST_TIME_CONSTANT,
 };
