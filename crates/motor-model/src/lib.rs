@@ -14,6 +14,8 @@
 //!   [`Effects`] of the diagnosis (Stribeck friction, cogging, sensor lag, thermal drift,
 //!   quadratic drag, brush drop, inductance saturation).
 //! - [`MeasurementModel`]: ADC, noise and encoder, separate from the plant.
+//! - [`withheld`]: the data generator of the withheld-effect benchmark, with a plant of its
+//!   own and each effect in two functional forms.
 //!
 //! ```
 //! use motor_model::{MotorParams, Derived, StepResponse};
@@ -38,6 +40,7 @@ mod real;
 mod sim;
 mod steady;
 mod step;
+pub mod withheld;
 
 pub use axis::{
     pulse_split, relative_error_percent, simulate_pd_axis, AxisParams, PdController, PulseSplit,
