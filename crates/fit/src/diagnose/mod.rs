@@ -10,8 +10,12 @@
 //!   the windows of largest excess), in operating region (speed and current bands, trends), in
 //!   frequency and shaft angle, with the whiteness and input cross-correlation of MATLAB's
 //!   `resid`. Each part carries a test that separates a real gap from noise.
+//! - [`verdict`]: *which* — candidate effects ranked by their held-out improvement, each with a
+//!   paired test against the noise, `none` when nothing is significant, an ambiguous verdict
+//!   when the best two cannot be told apart.
 //!
 //! Like the rest of the crate it does no I/O: records come in as slices, results go out as
 //! values (serialisable with `serde`).
 
 pub mod localise;
+pub mod verdict;
