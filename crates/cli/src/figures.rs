@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 use motor_model::{central_difference, Effects, MotorParams, Simulator};
 
-use crate::commands::identify::LoadedExcited;
 use crate::plot::{self, Panel, Series, MEASURED, MODEL, OTHER};
+use crate::steps::LoadedExcited;
 
 /// A file stem for `path` in `dir`: `dir/<file stem>_fit`.
 fn stem_in(dir: &Path, path: &str) -> PathBuf {
