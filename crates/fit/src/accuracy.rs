@@ -17,15 +17,16 @@ pub struct ParameterAccuracy {
     pub truth: f64,
     /// The identified value (SI units).
     pub estimate: f64,
-    /// `(estimate − truth)/truth` \[-\].
+    /// `estimate/truth − 1` \[-\] ([`relative_error`]).
     pub relative_error: f64,
     /// Whether the 95 % interval contains the truth; `None` without an interval.
     pub covered: Option<bool>,
 }
 
-/// Relative error \[-\] of `estimate` against `truth`: `(estimate − truth)/truth`.
+/// Relative error \[-\] of `estimate` against `truth`: `estimate/truth − 1` (within one
+/// rounding of the ratio, 1.1e-16, of the exact value).
 pub fn relative_error(estimate: f64, truth: f64) -> f64 {
-    (estimate - truth) / truth
+    estimate / truth - 1.0
 }
 
 /// Whether `value` lies in the closed interval `[lo, hi]`.

@@ -2,8 +2,8 @@
 
 use anyhow::Result;
 use fit::{
-    from_high_voltage, identify_full, identify_paper, FullFit, LmSettings, PaperIdentification,
-    Params33, PARAM_NAMES,
+    accuracy, from_high_voltage, identify_full, identify_paper, FullFit, LmSettings,
+    PaperIdentification, Params33,
 };
 use motor_model::{
     Derived, Effects, Input, MeasurementModel, MotorParams, Simulator, StepResponse, Trace,
@@ -213,25 +213,24 @@ fn identification_story(motor: &MotorParams, records: &[(f64, Input, Trace)]) ->
 }
 
 fn print_errors(motor: &MotorParams, paper: &PaperIdentification, full: &FullFit) {
-    let (truth, p, f) = (motor.values(), paper.params.values(), full.params.values());
     println!(
         "  {:<3} {:>9} {:>15} {:>15}   full 95% CI contains truth",
         "", "truth", "paper (error)", "full (rel. err)"
     );
-    for i in 0..6 {
-        let covered = full.ci95.map_or("-".to_string(), |ci| {
-            if ci[i][0] <= truth[i] && truth[i] <= ci[i][1] {
-                "yes".into()
-            } else {
-                "no".into()
-            }
-        });
+    let paper_errors = accuracy(&paper.params, None, motor);
+    let full_errors = accuracy(&full.params, full.ci95.as_ref(), motor);
+    for (p, f) in paper_errors.iter().zip(&full_errors) {
+        let covered = match f.covered {
+            None => "-",
+            Some(true) => "yes",
+            Some(false) => "no",
+        };
         println!(
             "  {:<3} {:>9} {:>+14.4}% {:>+14.2e}    {covered}",
-            PARAM_NAMES[i],
-            truth[i],
-            100.0 * (p[i] / truth[i] - 1.0),
-            f[i] / truth[i] - 1.0,
+            p.name,
+            p.truth,
+            100.0 * p.relative_error,
+            f.relative_error,
         );
     }
     println!(
