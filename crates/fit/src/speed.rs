@@ -1,6 +1,6 @@
 //! The speed a record gives: from the encoder angle where there is one, else the tachometer.
 
-use motor_model::{central_difference, mean_period};
+use motor_model::{difference_over, mean_period};
 
 /// Shortest time base \[s\] of a speed taken from the encoder: at 100 kHz a 2000-count encoder
 /// moves half a count per sample at 160 rad/s, and the central difference of one sample reads
@@ -19,20 +19,7 @@ pub fn encoder_speed(t: &[f64], theta: &[f64]) -> Vec<f64> {
     } else {
         1
     };
-    if m == 1 {
-        return central_difference(t, theta);
-    }
-    (0..n)
-        .map(|i| {
-            let (a, b) = (i.saturating_sub(m), (i + m).min(n - 1));
-            let span = t[b] - t[a];
-            if span > 0.0 {
-                (theta[b] - theta[a]) / span
-            } else {
-                0.0
-            }
-        })
-        .collect()
+    difference_over(t, theta, m)
 }
 
 /// The speed \[rad/s\] of a record sampled at `t` \[s\]: from the encoder angle `position`
@@ -54,6 +41,7 @@ pub fn record_speed(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use motor_model::central_difference;
 
     #[test]
     fn encoder_speed_of_a_ramp_is_its_slope_at_any_rate() {
