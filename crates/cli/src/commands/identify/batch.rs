@@ -38,6 +38,16 @@ struct Row {
     seconds: f64,
 }
 
+/// The paths of the readable `entries` that `keep` accepts, sorted by name.
+fn sorted_paths(entries: std::fs::ReadDir, keep: impl Fn(&Path) -> bool) -> Vec<PathBuf> {
+    let mut out: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| keep(p))
+        .collect();
+    out.sort();
+    out
+}
+
 /// The motor folders under `dir`, sorted by name.
 fn motor_folders(dir: &Path) -> Result<Vec<PathBuf>> {
     let entries = std::fs::read_dir(dir).map_err(|e| {
@@ -46,11 +56,7 @@ fn motor_folders(dir: &Path) -> Result<Vec<PathBuf>> {
             dir.display()
         ))
     })?;
-    let mut out: Vec<PathBuf> = entries
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.is_dir())
-        .collect();
-    out.sort();
+    let out = sorted_paths(entries, Path::is_dir);
     if out.is_empty() {
         return Err(BadInput(format!(
             "--batch {}: no motor folders inside (expected DIR/NAME/high.csv and low.csv, or DIR/NAME/*.csv)",
@@ -86,11 +92,9 @@ fn identify_folder(folder: &Path) -> Row {
         ("full", fitted)
     } else {
         let fitted = (|| {
-            let mut csvs: Vec<PathBuf> = std::fs::read_dir(folder)?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| p.extension().is_some_and(|x| x == "csv"))
-                .collect();
-            csvs.sort();
+            let csvs = sorted_paths(std::fs::read_dir(folder)?, |p| {
+                p.extension().is_some_and(|x| x == "csv")
+            });
             if csvs.is_empty() {
                 return Err(BadInput(format!(
                     "{}: no high.csv/low.csv pair and no other *.csv record",

@@ -366,12 +366,7 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
             anyhow::bail!("the inverse model returned no fitted samples");
         };
         let t: Vec<f64> = f.t_s.iter().map(|s| rec.t[0] + s).collect();
-        let residual: Vec<f64> = f
-            .measured
-            .iter()
-            .zip(&f.model)
-            .map(|(y, m)| y - m)
-            .collect();
+        let residual = crate::plot::residual(&f.measured, &f.model);
         let (torque_label, residual_label) = match a.axis {
             AxisArg::Rotary => ("torque k·I [N·m]", "torque residual [N·m]"),
             AxisArg::Linear => ("force k·I [N]", "force residual [N]"),
@@ -416,12 +411,29 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
             }
         }
     }
+    // J (or M), f, Ts and the offset with their names, intervals and units.
+    let axis = fit.axis();
+    let values = [
+        axis.mass_kg,
+        axis.viscous_ns_per_m,
+        axis.coulomb_n,
+        axis.offset_n,
+    ];
+    let intervals: [Option<[f64; 2]>; 4] = fit.ci95.map_or([None; 4], |c| c.map(Some));
+    let rows = || {
+        MECHANICAL_NAMES
+            .iter()
+            .zip(values)
+            .zip(intervals)
+            .zip(units)
+            .map(|(((name, value), ci), unit)| (*name, value, ci, unit))
+    };
     if a.json {
         let mut parameters = serde_json::Map::new();
-        for i in 0..4 {
+        for (name, value, ci, unit) in rows() {
             parameters.insert(
-                MECHANICAL_NAMES[i].into(),
-                json!({"value": fit.values[i], "ci95": fit.ci95.map(|c| c[i]), "unit": units[i]}),
+                name.into(),
+                json!({"value": value, "ci95": ci, "unit": unit}),
             );
         }
         let report = json!({
@@ -449,17 +461,11 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
         println!("torque constant k = {} from the {k_source}", sig(k));
     }
     println!("      {:>12}   {:<27} unit", "value", "95% CI");
-    for i in 0..4 {
-        let ci = fit.ci95.map_or("-".to_string(), |c| {
-            format!("[{}, {}]", sig(c[i][0]), sig(c[i][1]))
+    for (name, value, ci, unit) in rows() {
+        let ci = ci.map_or("-".to_string(), |[lo, hi]| {
+            format!("[{}, {}]", sig(lo), sig(hi))
         });
-        println!(
-            "  {:<6} {:>12}   {:<27} {}",
-            MECHANICAL_NAMES[i],
-            sig(fit.values[i]),
-            ci,
-            units[i]
-        );
+        println!("  {name:<6} {:>12}   {ci:<27} {unit}", sig(value));
     }
     println!(
         "fit: {} samples after decimation by {}, torque residual RMS {}, fit {:.2} %",
