@@ -9,12 +9,15 @@
 
 mod args;
 mod commands;
+mod figures;
 mod output;
 mod paper_values;
 mod parallel;
 mod plot;
 mod record_csv;
 mod settings;
+mod simulated;
+mod steps;
 
 use std::process::ExitCode;
 

@@ -30,6 +30,11 @@ pub struct Panel<'a> {
 }
 
 /// Measured data (grey), model (blue), a second model (red).
+/// `measured − model`, sample by sample (as long as the shorter), for a residual panel.
+pub fn residual(measured: &[f64], model: &[f64]) -> Vec<f64> {
+    measured.iter().zip(model).map(|(y, m)| y - m).collect()
+}
+
 pub const MEASURED: RGBColor = RGBColor(120, 120, 120);
 /// The model's colour.
 pub const MODEL: RGBColor = RGBColor(20, 80, 200);

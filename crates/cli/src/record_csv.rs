@@ -151,6 +151,24 @@ impl Loaded {
         }
     }
 
+    /// The samples of each analog channel at an ADC rail, by channel.
+    pub fn clipped_channels(&self) -> [(fit::RecordChannel, &[bool]); 3] {
+        let [voltage, current, speed] = &self.clipped;
+        [
+            (fit::RecordChannel::Voltage, voltage),
+            (fit::RecordChannel::Current, current),
+            (fit::RecordChannel::Speed, speed),
+        ]
+    }
+
+    /// The samples of `channel` at an ADC rail.
+    pub fn clipped_mask(&self, channel: fit::RecordChannel) -> &[bool] {
+        self.clipped_channels()
+            .into_iter()
+            .find_map(|(c, m)| (c == channel).then_some(m))
+            .unwrap_or_default()
+    }
+
     /// One line per clipped channel: how many samples, where, at which value.
     pub fn clipping_report(&self) -> Vec<String> {
         let names = ["voltage", "current", "speed"];

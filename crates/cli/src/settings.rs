@@ -7,7 +7,7 @@ use motor_model::{
     Adc, Effect, Effects, Input, MeasurementModel, MotorParams, Range, SpeedSource, Trace,
 };
 
-use crate::args::{MeasurementArgs, SpeedFromArg};
+use crate::args::{MeasurementArgs, MethodArg, SpeedFromArg};
 use crate::BadInput;
 
 /// `paper` or a JSON file with keys R, L, k, f, J, Ts.
@@ -206,6 +206,18 @@ pub struct Logger {
 }
 
 impl Logger {
+    /// The paper's logger ([`MeasurementModel::paper_logger`]: 10-bit ADC, 1 LSB of noise,
+    /// 2000-count encoder) recording `duration_s` \[s\] at `rate_hz` \[Hz\].
+    pub fn paper(duration_s: f64, rate_hz: f64) -> Logger {
+        Logger {
+            duration_s,
+            rate_hz,
+            adc_bits: 10,
+            noise_lsb: 1.0,
+            encoder_cpr: 2000,
+        }
+    }
+
     /// A logger from its options, each checked: `--duration` and `--rate` ([`record_grid`]),
     /// `--adc-bits` 1–24, `--noise-lsb` ≥ 0, `--encoder-cpr` > 0.
     pub fn new(
@@ -439,4 +451,12 @@ pub fn measurement(a: &MeasurementArgs, trace: &Trace) -> Result<MeasurementMode
         },
         seed: a.seed,
     })
+}
+
+/// The library's step-pair method for `--method`.
+pub fn step_method(method: MethodArg) -> fit::StepMethod {
+    match method {
+        MethodArg::Paper => fit::StepMethod::Paper,
+        MethodArg::Full => fit::StepMethod::Full,
+    }
 }

@@ -92,3 +92,18 @@ pub use stats::{
 };
 pub use steady_fit::{fit_apparent_resistance, SteadyFit};
 pub use step_location::{locate_step, locate_step_with, StepLocation};
+
+mod accuracy;
+mod pipeline;
+mod speed;
+
+pub use accuracy::{
+    accuracy, contains, median, relative_error, summarize, ParameterAccuracy, ParameterSummary,
+};
+pub use pipeline::{
+    identify_step_pair, judge_clipping, parameter_estimates, steady_value, torque_constant,
+    ClippingVerdict, PaperSkipped, ParameterEstimate, RecordChannel, StepMethod, StepPairError,
+    StepPairIdentification, StepRecord, StepRoute, TorqueConstantError, TorqueConstantSource,
+    MAX_CLIPPED_FRACTION, MAX_CLIPPED_VOLTAGE, POORLY_DETERMINED, STEADY_TAIL_PARTS,
+};
+pub use speed::{encoder_speed, record_speed, ENCODER_SPEED_BASE_S};

@@ -4,9 +4,10 @@
 
 use fit::{
     check_step_test, electrical_equation, equation_error_start, fit_33, identify_full,
-    identify_inverse_model, identify_output_error, identify_paper, locate_step, speed_check_c8,
-    steady_state_start, voltage_input, ExcitedRecord, InverseModelSettings, LmSettings, Params33,
-    Record33, StepTest,
+    identify_inverse_model, identify_output_error, identify_paper, identify_step_pair, locate_step,
+    record_speed, speed_check_c8, steady_state_start, torque_constant, voltage_input,
+    ExcitedRecord, InverseModelSettings, LmSettings, Params33, Record33, StepInputs, StepMethod,
+    StepRecord, StepTest,
 };
 use motor_model::{Input, MotorParams, MotorState, StepResponse};
 use proptest::prelude::*;
@@ -88,6 +89,13 @@ proptest! {
                 prop_assert!(r.is_some());
             }
         }
+        let pair = StepRecord { test, inputs: StepInputs::default() };
+        for method in [StepMethod::Paper, StepMethod::Full] {
+            let piped = identify_step_pair(&pair, &pair, method, settings);
+            if used_misaligned {
+                prop_assert!(piped.is_err());
+            }
+        }
         let input = Input::Step { volts: 40.0, at_s: 0.0 };
         let record = ExcitedRecord {
             input: &input,
@@ -108,6 +116,13 @@ proptest! {
                 prop_assert!(r.is_some());
             }
         }
+        let k = torque_constant(None, Some(&record), 0.1);
+        if used_misaligned {
+            prop_assert!(k.is_err());
+        }
+        let t_speed: Vec<f64> = (0..n_current).map(|k| k as f64 * 1e-3).collect();
+        let w = record_speed(&t_speed, use_speed.then_some(&speed[..]), use_angle.then_some(&angle[..]));
+        prop_assert_eq!(w.is_some(), use_speed || use_angle);
         let torque: Vec<f64> = current.iter().map(|c| 0.15 * c).collect();
         let inverse = identify_inverse_model(1e-3, &torque, &angle, InverseModelSettings::default());
         if n_angle != n_current {

@@ -50,8 +50,8 @@ pub use axis::{
 pub use derived::{Derived, Regime};
 pub use error::ModelError;
 pub use measure::{
-    central_difference, mean_period, Adc, MeasurementModel, NoiseRng, Range, Readings, Record,
-    SpeedSource,
+    central_difference, difference_over, mean_period, Adc, MeasurementModel, NoiseRng, Range,
+    Readings, Record, SpeedSource,
 };
 pub use params::MotorParams;
 pub use real::{Dual, Real};

@@ -303,10 +303,17 @@ pub fn mean_period(t: &[f64]) -> f64 {
 
 /// Derivative of `y` over `t` by central differences (one-sided at the ends) \[unit of y / s\].
 pub fn central_difference(t: &[f64], y: &[f64]) -> Vec<f64> {
+    difference_over(t, y, 1)
+}
+
+/// Derivative of `y` over `t` by differences over ±`m` samples (`m` = 1: the central
+/// difference), one-sided within `m` samples of the ends \[unit of y / s\]; 0 where the time
+/// span is not positive. As long as the shorter of `t` and `y`.
+pub fn difference_over(t: &[f64], y: &[f64], m: usize) -> Vec<f64> {
     let n = t.len().min(y.len());
     (0..n)
         .map(|i| {
-            let (a, b) = (i.saturating_sub(1), (i + 1).min(n.saturating_sub(1)));
+            let (a, b) = (i.saturating_sub(m), (i + m).min(n.saturating_sub(1)));
             let span = t[b] - t[a];
             if span > 0.0 {
                 (y[b] - y[a]) / span

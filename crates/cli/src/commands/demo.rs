@@ -2,21 +2,21 @@
 
 use anyhow::Result;
 use fit::{
-    from_high_voltage, identify_full, identify_paper, FullFit, LmSettings, PaperIdentification,
-    Params33, PARAM_NAMES,
+    accuracy, from_high_voltage, identify_full, identify_paper, FullFit, LmSettings,
+    PaperIdentification, Params33,
 };
 use motor_model::{
     Derived, Effects, Input, MeasurementModel, MotorParams, Simulator, StepResponse, Trace,
 };
 
 use crate::args::DemoArgs;
-use crate::commands::identify::{step_from_record, LoadedStep};
-use crate::commands::montecarlo::{record, Logger};
-use crate::commands::simulate;
 use crate::paper_values::{
     compare, HIGH_VOLTAGE_V, LOGGER_RATE_HZ, LOW_VOLTAGE_V, TABLE_1, TABLE_2, TEST_LENGTH_S,
 };
 use crate::record_csv;
+use crate::settings::Logger;
+use crate::simulated::{metadata, record};
+use crate::steps::{step_from_record, LoadedStep};
 
 fn mark(same: bool) -> &'static str {
     if same {
@@ -111,11 +111,7 @@ pub fn run(a: &DemoArgs) -> Result<()> {
         for (e, input, trace) in records {
             let record = motor_model::MeasurementModel::default().apply(&trace)?;
             let path = dir.join(format!("paper_{e}V.csv"));
-            record_csv::write_file(
-                &path,
-                &record,
-                &simulate::metadata(&motor, &Effects::none(), &input),
-            )?;
+            record_csv::write_file(&path, &record, &metadata(&motor, &Effects::none(), &input))?;
             println!("wrote {}", path.display());
         }
     }
@@ -203,13 +199,7 @@ fn identification_story(motor: &MotorParams, records: &[(f64, Input, Trace)]) ->
     print_errors(motor, &paper, &full);
 
     println!("\nThrough the paper's logger — 10-bit ADC, 1 LSB noise, 2000-count encoder, speed from the encoder");
-    let logger = Logger {
-        duration_s: TEST_LENGTH_S,
-        rate_hz: LOGGER_RATE_HZ,
-        adc_bits: 10,
-        noise_lsb: 1.0,
-        encoder_cpr: 2000,
-    };
+    let logger = Logger::paper(TEST_LENGTH_S, LOGGER_RATE_HZ);
     let (hv, lv) = (
         record(&logger, motor, HIGH_VOLTAGE_V, 1)?,
         record(&logger, motor, LOW_VOLTAGE_V, 2)?,
@@ -223,25 +213,24 @@ fn identification_story(motor: &MotorParams, records: &[(f64, Input, Trace)]) ->
 }
 
 fn print_errors(motor: &MotorParams, paper: &PaperIdentification, full: &FullFit) {
-    let (truth, p, f) = (motor.values(), paper.params.values(), full.params.values());
     println!(
         "  {:<3} {:>9} {:>15} {:>15}   full 95% CI contains truth",
         "", "truth", "paper (error)", "full (rel. err)"
     );
-    for i in 0..6 {
-        let covered = full.ci95.map_or("-".to_string(), |ci| {
-            if ci[i][0] <= truth[i] && truth[i] <= ci[i][1] {
-                "yes".into()
-            } else {
-                "no".into()
-            }
-        });
+    let paper_errors = accuracy(&paper.params, None, motor);
+    let full_errors = accuracy(&full.params, full.ci95.as_ref(), motor);
+    for (p, f) in paper_errors.iter().zip(&full_errors) {
+        let covered = match f.covered {
+            None => "-",
+            Some(true) => "yes",
+            Some(false) => "no",
+        };
         println!(
             "  {:<3} {:>9} {:>+14.4}% {:>+14.2e}    {covered}",
-            PARAM_NAMES[i],
-            truth[i],
-            100.0 * (p[i] / truth[i] - 1.0),
-            f[i] / truth[i] - 1.0,
+            p.name,
+            p.truth,
+            100.0 * p.relative_error,
+            f.relative_error,
         );
     }
     println!(

@@ -10,10 +10,10 @@ use anyhow::Result;
 use motor_model::{Derived, Effects, Input, MotorParams, NoiseRng};
 
 use crate::args::FleetArgs;
-use crate::commands::montecarlo::{measured_step, Logger};
-use crate::commands::simulate::metadata;
 use crate::output;
 use crate::record_csv::write_file;
+use crate::settings::Logger;
+use crate::simulated::{measured_step, metadata};
 use crate::{settings, BadInput};
 
 /// Samples aimed at per record.
@@ -74,13 +74,7 @@ pub fn run(a: &FleetArgs) -> Result<()> {
             settings::breakaway_step(option, &motor, volts, duration)
                 .map_err(|e| BadInput(format!("{name}: {e:#}")))?;
         }
-        let logger = Logger {
-            duration_s: duration,
-            rate_hz: rate,
-            adc_bits: 10,
-            noise_lsb: 1.0,
-            encoder_cpr: 2000,
-        };
+        let logger = Logger::paper(duration, rate);
         let dir = a.out.join(&name);
         std::fs::create_dir_all(&dir)?;
         output::write(

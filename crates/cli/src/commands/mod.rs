@@ -1,9 +1,7 @@
 pub mod acquire;
-pub mod batch;
 pub mod demo;
 pub mod emps;
 pub mod emulate;
-pub mod figures;
 pub mod fleet;
 pub mod identify;
 pub mod model;

@@ -4,13 +4,16 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::Result;
-use fit::{identify_full_with_inputs, identify_paper, steady_state_start, LmSettings, PARAM_NAMES};
-use motor_model::{MeasurementModel, MotorParams, NoiseRng, Record, StepResponse};
+use fit::{
+    accuracy, identify_step_pair, parameter_estimates, summarize, LmSettings, ParameterAccuracy,
+    StepMethod, StepPairError,
+};
+use motor_model::{MotorParams, NoiseRng};
 use serde_json::json;
 
-use crate::args::{MeasurementArgs, MontecarloArgs, SpeedFromArg};
-use crate::commands::identify::{step_from_record_with, LoadedStep};
-use crate::settings;
+use crate::args::MontecarloArgs;
+use crate::settings::{self, Logger};
+use crate::simulated::record_at;
 use crate::{BadInput, NotConverged};
 
 /// Most record pairs a study may ask for (200 take about 10 s on 2 cores; a million, a day).
@@ -23,105 +26,11 @@ const RANGE_STRETCH: f64 = 0.05;
 /// Outcome of one record pair.
 struct Run {
     /// `None` where the paper's method does not apply (e.g. an underdamped motor).
-    paper_error: Option<[f64; 6]>,
-    full_error: [f64; 6],
-    covered: Option<[bool; 6]>,
+    paper: Option<Vec<ParameterAccuracy>>,
+    full: Vec<ParameterAccuracy>,
     converged: bool,
     /// Termination and cost of a fit that did not converge.
     stop: Option<String>,
-}
-
-pub use crate::settings::Logger;
-
-/// A step of `volts` at `at_s` \[s\] on `motor` recorded by `logger` with noise seed `seed`,
-/// with the measurement chain used.
-pub fn measured_step(
-    logger: &Logger,
-    motor: &MotorParams,
-    volts: f64,
-    at_s: f64,
-    seed: u64,
-) -> Result<(Record, MeasurementModel)> {
-    measured_step_with(logger, None, 1.0, motor, volts, at_s, seed)
-}
-
-/// [`measured_step`] with `voltage_noise_lsb` \[LSB\] of noise on the voltage channel instead
-/// of the logger's `noise_lsb`, if given, and every conditioning range stretched by
-/// `range_scale` \[-\] (≥ 1: the signals sit elsewhere between the ADC's codes).
-pub fn measured_step_with(
-    logger: &Logger,
-    voltage_noise_lsb: Option<f64>,
-    range_scale: f64,
-    motor: &MotorParams,
-    volts: f64,
-    at_s: f64,
-    seed: u64,
-) -> Result<(Record, MeasurementModel)> {
-    let trace = StepResponse::new(motor, volts)
-        .trace(at_s, logger.duration_s, logger.rate_hz)
-        .map_err(|e| BadInput(e.to_string()))?;
-    let m = MeasurementArgs {
-        adc_bits: Some(logger.adc_bits),
-        range_voltage: None,
-        range_current: None,
-        range_speed: None,
-        noise_lsb: Some(logger.noise_lsb),
-        encoder_cpr: Some(logger.encoder_cpr),
-        speed_from: SpeedFromArg::Encoder,
-        seed,
-    };
-    let mut model = settings::measurement(&m, &trace)?;
-    if let Some(adc) = model.adc {
-        for c in 0..3 {
-            if let Some(r) = model.ranges[c] {
-                let stretched = motor_model::Range::new(r.lo * range_scale, r.hi * range_scale)
-                    .map_err(|e| BadInput(e.to_string()))?;
-                let lsb = match (c, voltage_noise_lsb) {
-                    (0, Some(v)) => v,
-                    _ => logger.noise_lsb,
-                };
-                model.ranges[c] = Some(stretched);
-                model.noise_std[c] = lsb * adc.lsb(stretched);
-            }
-        }
-    }
-    let rec = model.apply(&trace).map_err(|e| BadInput(e.to_string()))?;
-    Ok((rec, model))
-}
-
-/// A step of `volts` on `motor` recorded by `logger` with noise seed `seed`, located.
-pub fn record(logger: &Logger, motor: &MotorParams, volts: f64, seed: u64) -> Result<LoadedStep> {
-    record_at(logger, (None, 1.0), motor, volts, 0.0, seed)
-}
-
-/// A step of `volts` at `at_s` \[s\] on `motor` recorded by `logger` (with
-/// `voltage_noise_lsb` on the voltage if given, ranges stretched by `range_scale`) with noise
-/// seed `seed`, located.
-fn record_at(
-    logger: &Logger,
-    (voltage_noise_lsb, range_scale): (Option<f64>, f64),
-    motor: &MotorParams,
-    volts: f64,
-    at_s: f64,
-    seed: u64,
-) -> Result<LoadedStep> {
-    let (rec, model) = measured_step_with(
-        logger,
-        voltage_noise_lsb,
-        range_scale,
-        motor,
-        volts,
-        at_s,
-        seed,
-    )?;
-    let lsb = |c: usize| model.adc.zip(model.ranges[c]).map(|(adc, r)| adc.lsb(r));
-    let mut step = step_from_record_with(
-        format!("simulated {volts} V record (seed {seed})"),
-        rec,
-        lsb(0),
-    )?;
-    step.inputs.current_lsb_a = lsb(1).unwrap_or(0.0);
-    Ok(step)
 }
 
 /// How each run's motor and measurement vary (checked before the first run).
@@ -189,43 +98,25 @@ fn one_run(study: &Study, i: usize) -> Result<Run> {
         at_low,
         seed.wrapping_add(1),
     )?;
-    let tests = [hv.test(), lv.test()];
-    let truth = motor.values();
-    let rel = |p: &MotorParams| {
-        let v = p.values();
-        std::array::from_fn(|k| (v[k] - truth[k]) / truth[k])
-    };
-    let paper = identify_paper(&tests[0], &tests[1], LmSettings::default()).ok();
-    let start = match &paper {
-        Some(p) => p.params,
-        None => steady_state_start(&tests[0], &tests[1])
-            .map_err(|e| BadInput(format!("run {i}: start: {e}")))?,
-    };
-    let full = identify_full_with_inputs(
-        &tests,
-        &[hv.inputs, lv.inputs],
-        &start,
+    let result = identify_step_pair(
+        &hv.step_record(),
+        &lv.step_record(),
+        StepMethod::Full,
         LmSettings::default(),
     )
-    .map_err(|e| BadInput(format!("run {i}: full method: {e}")))?;
+    .map_err(|e| match e {
+        StepPairError::Start(e) => BadInput(format!("run {i}: start: {e}")),
+        e => BadInput(format!("run {i}: full method: {e}")),
+    })?;
+    let full = result
+        .full
+        .ok_or_else(|| BadInput(format!("run {i}: full method: no fit")))?;
     Ok(Run {
-        paper_error: paper.map(|p| rel(&p.params)),
-        full_error: rel(&full.params),
-        covered: full
-            .ci95
-            .map(|ci| std::array::from_fn(|k| ci[k][0] <= truth[k] && truth[k] <= ci[k][1])),
+        paper: result.paper.ok().map(|p| accuracy(&p.params, None, motor)),
+        full: accuracy(&full.params, full.ci95.as_ref(), motor),
         converged: full.accepted(),
         stop: full.failure().map(|why| format!("run {i}: {why}")),
     })
-}
-
-fn median_abs(xs: impl Iterator<Item = f64>) -> f64 {
-    let mut v: Vec<f64> = xs.map(f64::abs).collect();
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let mid = v.len() / 2;
-    *v.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 pub fn run(a: &MontecarloArgs) -> Result<()> {
@@ -323,20 +214,25 @@ pub fn run(a: &MontecarloArgs) -> Result<()> {
         .into());
     }
     let elapsed = started.elapsed().as_secs_f64();
-    let truth = motor.values();
-    let with_ci = runs.iter().filter(|r| r.covered.is_some()).count();
+    let with_ci = runs
+        .iter()
+        .filter(|r| r.full.iter().any(|p| p.covered.is_some()))
+        .count();
     let converged = runs.iter().filter(|r| r.converged).count();
-    let paper_applied = runs.iter().filter(|r| r.paper_error.is_some()).count();
-    let rows: Vec<_> = (0..6)
-        .map(|k| {
-            let paper = median_abs(runs.iter().filter_map(|r| r.paper_error.map(|e| e[k])));
-            let full = median_abs(runs.iter().map(|r| r.full_error[k]));
-            let covered = runs
-                .iter()
-                .filter(|r| r.covered.is_some_and(|c| c[k]))
-                .count();
-            let coverage = covered as f64 / with_ci.max(1) as f64;
-            (PARAM_NAMES[k], truth[k], paper, full, coverage)
+    let paper_applied = runs.iter().filter(|r| r.paper.is_some()).count();
+    let paper = summarize(runs.iter().filter_map(|r| r.paper.as_deref()));
+    let full = summarize(runs.iter().map(|r| r.full.as_slice()));
+    let rows: Vec<_> = parameter_estimates(&motor, None)
+        .into_iter()
+        .zip(paper.iter().zip(&full))
+        .map(|(truth, (paper, full))| {
+            (
+                truth.name,
+                truth.value,
+                paper.median_abs_relative_error.unwrap_or(f64::NAN),
+                full.median_abs_relative_error.unwrap_or(f64::NAN),
+                full.coverage(),
+            )
         })
         .collect();
     if a.json {

@@ -128,47 +128,6 @@ pub fn trace(
     result.map_err(|e| BadInput(e.to_string()).into())
 }
 
-/// Metadata lines describing a simulated record.
-pub fn metadata(motor: &MotorParams, effects: &Effects, input: &Input) -> Vec<(String, String)> {
-    let input_text = match input {
-        Input::Step { volts, at_s } => format!("step {volts} V at {at_s} s"),
-        Input::Sine {
-            amplitude_v,
-            frequency_hz,
-        } => format!("sine {amplitude_v} V, {frequency_hz} Hz"),
-        Input::Piecewise { times_s, volts } => {
-            let levels: Vec<String> = times_s
-                .iter()
-                .zip(volts)
-                .map(|(t, v)| format!("{t}:{v}"))
-                .collect();
-            format!("levels {}", levels.join(","))
-        }
-        Input::Sampled { volts, dt_s, .. } => {
-            format!("sampled, {} samples every {dt_s} s", volts.len())
-        }
-    };
-    let effect_text = if effects.is_nominal() {
-        "none".to_string()
-    } else {
-        effects
-            .list()
-            .iter()
-            .map(ToString::to_string)
-            .collect::<Vec<_>>()
-            .join(" ")
-    };
-    vec![
-        ("source".into(), "motorid simulate".into()),
-        (
-            "motor".into(),
-            serde_json::to_string(motor).unwrap_or_default(),
-        ),
-        ("input".into(), input_text),
-        ("effects".into(), effect_text),
-    ]
-}
-
 pub fn run(a: &SimulateArgs) -> Result<()> {
     let motor = settings::motor(&a.motor.motor)?;
     let (duration_s, rate_hz) = settings::record_grid(a.duration, a.rate)?;
@@ -209,7 +168,7 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
             _ => "standard output".into(),
         }
     ));
-    let mut meta = metadata(&motor, &effects, &input);
+    let mut meta = crate::simulated::metadata(&motor, &effects, &input);
     let ideal = measurement.adc.is_none()
         && measurement.noise_std.iter().all(|&s| s == 0.0)
         && measurement.encoder_counts_per_rev.is_none();

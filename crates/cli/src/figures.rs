@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 use motor_model::{central_difference, Effects, MotorParams, Simulator};
 
-use crate::commands::identify::LoadedExcited;
 use crate::plot::{self, Panel, Series, MEASURED, MODEL, OTHER};
+use crate::steps::LoadedExcited;
 
 /// A file stem for `path` in `dir`: `dir/<file stem>_fit`.
 fn stem_in(dir: &Path, path: &str) -> PathBuf {
@@ -38,12 +38,7 @@ pub fn fit_figures(
             .map_err(|e| anyhow::anyhow!("{}: simulating the fitted model: {e}", rec.path))?;
         let t: Vec<f64> = r.t.clone();
         let model_v: Vec<f64> = trace.voltage.clone();
-        let current_res: Vec<f64> = r
-            .current
-            .iter()
-            .zip(&trace.current)
-            .map(|(y, m)| y - m)
-            .collect();
+        let current_res = plot::residual(&r.current, &trace.current);
         let (speed, speed_label): (Vec<f64>, &str) = match (&r.position, &r.speed) {
             (Some(p), _) => (
                 central_difference(&r.t, p),
@@ -57,7 +52,7 @@ pub fn fit_figures(
         } else {
             trace.speed.clone()
         };
-        let speed_res: Vec<f64> = speed.iter().zip(&model_speed).map(|(y, m)| y - m).collect();
+        let speed_res = plot::residual(&speed, &model_speed);
         let mut panels = vec![
             Panel {
                 y_label: "voltage [V]",

@@ -10,16 +10,16 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Result;
-use fit::{FullFit, PARAM_NAMES};
+use fit::{
+    accuracy, parameter_estimates, summarize, FullFit, ParameterAccuracy, StepMethod, PARAM_NAMES,
+};
 use motor_model::MotorParams;
 use serde_json::{json, Value};
 
-use crate::args::{IdentifyArgs, MethodArg};
-use crate::commands::identify::{
-    fit_excited, identify_pair, in_order, load_excited, load_step, LoadedExcited,
-};
+use crate::args::IdentifyArgs;
 use crate::output;
 use crate::record_csv::ColumnMap;
+use crate::steps::{fit_excited, identify_pair, in_order, load_excited, load_step, LoadedExcited};
 use crate::{parallel, settings, BadInput, NotConverged};
 
 /// Outcome of one folder.
@@ -33,7 +33,19 @@ struct Row {
     method: &'static str,
     outcome: Outcome,
     truth: Option<MotorParams>,
+    /// The fit against `truth`, when both are there.
+    against: Option<Vec<ParameterAccuracy>>,
     seconds: f64,
+}
+
+/// The paths of the readable `entries` that `keep` accepts, sorted by name.
+fn sorted_paths(entries: std::fs::ReadDir, keep: impl Fn(&Path) -> bool) -> Vec<PathBuf> {
+    let mut out: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| keep(p))
+        .collect();
+    out.sort();
+    out
 }
 
 /// The motor folders under `dir`, sorted by name.
@@ -44,11 +56,7 @@ fn motor_folders(dir: &Path) -> Result<Vec<PathBuf>> {
             dir.display()
         ))
     })?;
-    let mut out: Vec<PathBuf> = entries
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.is_dir())
-        .collect();
-    out.sort();
+    let out = sorted_paths(entries, Path::is_dir);
     if out.is_empty() {
         return Err(BadInput(format!(
             "--batch {}: no motor folders inside (expected DIR/NAME/high.csv and low.csv, or DIR/NAME/*.csv)",
@@ -78,17 +86,15 @@ fn identify_folder(folder: &Path) -> Row {
                 load_step(&low, &ColumnMap::default(), true)?,
             );
             let (hv, lv, _) = in_order(hv, lv);
-            let (_, full) = identify_pair(&hv, &lv, MethodArg::Full)?;
-            full.ok_or_else(|| anyhow::anyhow!("no full fit"))
+            let result = identify_pair(&hv, &lv, StepMethod::Full)?;
+            result.full.ok_or_else(|| anyhow::anyhow!("no full fit"))
         })();
         ("full", fitted)
     } else {
         let fitted = (|| {
-            let mut csvs: Vec<PathBuf> = std::fs::read_dir(folder)?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| p.extension().is_some_and(|x| x == "csv"))
-                .collect();
-            csvs.sort();
+            let csvs = sorted_paths(std::fs::read_dir(folder)?, |p| {
+                p.extension().is_some_and(|x| x == "csv")
+            });
             if csvs.is_empty() {
                 return Err(BadInput(format!(
                     "{}: no high.csv/low.csv pair and no other *.csv record",
@@ -111,11 +117,16 @@ fn identify_folder(folder: &Path) -> Row {
             message: format!("{e:#}"),
         },
     };
+    let against = match (&outcome, &truth) {
+        (Outcome::Fitted(f), Some(t)) => Some(accuracy(&f.params, f.ci95.as_ref(), t)),
+        _ => None,
+    };
     Row {
         name,
         method,
         outcome,
         truth,
+        against,
         seconds: started.elapsed().as_secs_f64(),
     }
 }
@@ -133,17 +144,18 @@ fn row_json(r: &Row) -> Value {
                 obj["error"] = json!(why);
             }
             obj["iterations"] = json!(fit.iterations);
-            let values = fit.params.values();
             let mut params = serde_json::Map::new();
-            for k in 0..6 {
-                let mut p = json!({"value": values[k], "ci95": fit.ci95.map(|c| c[k])});
-                if let Some(t) = r.truth {
-                    let truth = t.values()[k];
-                    p["truth"] = json!(truth);
-                    p["error_percent"] = json!(100.0 * (values[k] / truth - 1.0));
-                    p["covered"] = json!(fit.ci95.map(|c| c[k][0] <= truth && truth <= c[k][1]));
+            for (k, e) in parameter_estimates(&fit.params, fit.ci95.as_ref())
+                .into_iter()
+                .enumerate()
+            {
+                let mut p = json!({"value": e.value, "ci95": e.ci95});
+                if let Some(a) = r.against.as_ref().and_then(|a| a.get(k)) {
+                    p["truth"] = json!(a.truth);
+                    p["error_percent"] = json!(100.0 * a.relative_error);
+                    p["covered"] = json!(a.covered);
                 }
-                params.insert(PARAM_NAMES[k].into(), p);
+                params.insert(e.name.into(), p);
             }
             obj["parameters"] = Value::Object(params);
         }
@@ -161,50 +173,45 @@ fn summary_csv(rows: &[Row]) -> String {
     }
     out.push_str(",error\n");
     for r in rows {
-        let (status, iterations, values, ci, message) = match &r.outcome {
+        let (status, iterations, estimates, message) = match &r.outcome {
             Outcome::Fitted(f) => (
                 status_of(f),
                 f.iterations.to_string(),
-                Some(f.params.values()),
-                f.ci95,
+                parameter_estimates(&f.params, f.ci95.as_ref()),
                 f.failure().unwrap_or_default(),
             ),
             Outcome::Failed { message, .. } => (
                 "error",
                 String::new(),
-                None,
-                None,
+                Vec::new(),
                 message.replace(['"', '\n'], "'"),
             ),
         };
+        let truths = r
+            .truth
+            .map(|t| parameter_estimates(&t, None))
+            .unwrap_or_default();
         out.push_str(&format!(
             "{},{},{status},{iterations},{:.3}",
             r.name, r.method, r.seconds
         ));
-        for k in 0..6 {
-            let v = values.map(|v| v[k]);
-            let t = r.truth.map(|t| t.values()[k]);
+        for k in 0..PARAM_NAMES.len() {
+            let e = estimates.get(k);
+            let ci = e.and_then(|e| e.ci95);
+            let error = r.against.as_ref().and_then(|a| a.get(k));
             let cell = |x: Option<f64>| x.map_or(String::new(), |x| format!("{x}"));
             out.push_str(&format!(
                 ",{},{},{},{},{}",
-                cell(v),
-                cell(ci.map(|c| c[k][0])),
-                cell(ci.map(|c| c[k][1])),
-                cell(t),
-                cell(v.zip(t).map(|(v, t)| 100.0 * (v / t - 1.0)))
+                cell(e.map(|e| e.value)),
+                cell(ci.map(|c| c[0])),
+                cell(ci.map(|c| c[1])),
+                cell(truths.get(k).map(|t| t.value)),
+                cell(error.map(|a| 100.0 * a.relative_error))
             ));
         }
         out.push_str(&format!(",\"{message}\"\n"));
     }
     out
-}
-
-fn median(mut xs: Vec<f64>) -> f64 {
-    if xs.is_empty() {
-        return f64::NAN;
-    }
-    xs.sort_by(f64::total_cmp);
-    xs[xs.len() / 2]
 }
 
 pub fn run(a: &IdentifyArgs, dir: &Path) -> Result<()> {
@@ -240,27 +247,15 @@ pub fn run(a: &IdentifyArgs, dir: &Path) -> Result<()> {
         .filter(|r| matches!(&r.outcome, Outcome::Fitted(f) if !f.accepted()))
         .count();
     let failed = n - ok - not_converged;
-    let fitted: Vec<&Row> = rows
-        .iter()
-        .filter(|r| r.truth.is_some() && matches!(r.outcome, Outcome::Fitted(_)))
+    let fitted: Vec<&[ParameterAccuracy]> =
+        rows.iter().filter_map(|r| r.against.as_deref()).collect();
+    let aggregate: Vec<_> = summarize(fitted.iter().copied())
+        .into_iter()
+        .map(|p| {
+            let median = p.median_abs_relative_error.map_or(f64::NAN, |m| 100.0 * m);
+            (p.name, median, p.covered, p.with_ci)
+        })
         .collect();
-    let mut aggregate = Vec::new();
-    for k in 0..6 {
-        let mut errors = Vec::new();
-        let (mut covered, mut with_ci) = (0, 0);
-        for r in &fitted {
-            let (Outcome::Fitted(f), Some(t)) = (&r.outcome, r.truth) else {
-                continue;
-            };
-            let truth = t.values()[k];
-            errors.push((100.0 * (f.params.values()[k] / truth - 1.0)).abs());
-            if let Some(c) = f.ci95 {
-                with_ci += 1;
-                covered += usize::from(c[k][0] <= truth && truth <= c[k][1]);
-            }
-        }
-        aggregate.push((PARAM_NAMES[k], median(errors), covered, with_ci));
-    }
     let report = json!({
         "motors": n, "converged": ok, "not_converged": not_converged, "failed": failed,
         "seconds": elapsed, "threads": threads,
@@ -283,17 +278,17 @@ pub fn run(a: &IdentifyArgs, dir: &Path) -> Result<()> {
         for r in &rows {
             match &r.outcome {
                 Outcome::Fitted(f) => {
-                    let v = f.params.values();
+                    let p = &f.params;
                     println!(
                         "{:<16} {:<13} {:>12.5e} {:>12.5e} {:>12.5e} {:>12.5e} {:>12.5e} {:>12.5e}",
                         r.name,
                         status_of(f),
-                        v[0],
-                        v[1],
-                        v[2],
-                        v[3],
-                        v[4],
-                        v[5]
+                        p.r_ohm,
+                        p.l_henry,
+                        p.k_nm_per_a,
+                        p.f_nms_per_rad,
+                        p.j_kgm2,
+                        p.ts_nm
                     );
                 }
                 Outcome::Failed { message, .. } => println!("{:<16} error: {message}", r.name),

@@ -1,197 +1,21 @@
 //! `motorid identify`: motor parameters from step records (or Ts from steady tests).
 
-use std::path::Path;
+mod batch;
 
 use anyhow::Result;
 use fit::{
-    electrical_equation, equation_error_start, fit_apparent_resistance, identify_full_with_inputs,
-    identify_inverse_model, identify_output_error_with_inputs, identify_paper, locate_step_with,
-    steady_state_start, voltage_input, voltage_levels, ExcitedRecord, FullFit,
-    InverseModelSettings, LevelPrior, LmSettings, PaperIdentification, StepInputs, StepTest,
-    MECHANICAL_NAMES, PARAM_NAMES, PARAM_UNITS,
+    fit_apparent_resistance, identify_inverse_model, parameter_estimates, record_speed,
+    steady_value, torque_constant, voltage_input, ExcitedRecord, FullFit, InverseModelSettings,
+    PaperIdentification, TorqueConstantError, MECHANICAL_NAMES, PARAM_NAMES,
 };
-use motor_model::{central_difference, Derived, Input, MotorParams, Record};
+use motor_model::Derived;
 use serde_json::{json, Value};
 
-use crate::args::{AxisArg, DriveArg, IdentifyArgs, MethodArg};
-use crate::record_csv::{read_loaded, read_mapped, ColumnMap, Loaded};
+use crate::args::{AxisArg, DriveArg, IdentifyArgs};
+use crate::record_csv::{read_loaded, read_mapped, ColumnMap};
+use crate::settings;
+use crate::steps::{file_lines, fit_excited, identify_pair, in_order, load_excited, load_step};
 use crate::{BadInput, NotConverged};
-
-/// A 95 % interval wider than this fraction of the value marks a poorly determined parameter.
-const POORLY_DETERMINED: f64 = 0.1;
-
-/// A step record read and located: owns the columns the [`StepTest`] borrows.
-pub struct LoadedStep {
-    /// File it came from.
-    pub path: String,
-    /// The file with the line span of its samples (`hv.csv:7-50007`), for errors.
-    pub label: String,
-    volts: f64,
-    /// Whether the step was negative: its channels are kept with their signs reversed.
-    pub mirrored: bool,
-    dt: f64,
-    current: Vec<f64>,
-    speed: Option<Vec<f64>>,
-    position: Option<Vec<f64>>,
-    exclude_current: Option<Vec<bool>>,
-    exclude_speed: Option<Vec<bool>>,
-    /// What the record leaves unknown about the step (height and instant).
-    pub inputs: StepInputs,
-}
-
-impl LoadedStep {
-    /// Whether any sample is left out as clipped.
-    pub fn has_clipping(&self) -> bool {
-        self.exclude_current.is_some() || self.exclude_speed.is_some()
-    }
-
-    /// The identification's view of the record.
-    pub fn test(&self) -> StepTest<'_> {
-        StepTest {
-            volts: self.volts,
-            t_first: 0.0,
-            dt: self.dt,
-            current: &self.current,
-            speed: self.speed.as_deref(),
-            position: self.position.as_deref(),
-            exclude_current: self.exclude_current.as_deref(),
-            exclude_speed: self.exclude_speed.as_deref(),
-        }
-    }
-}
-
-/// Samples of current and speed to leave out, `None` where nothing is clipped.
-pub type ClipMasks = (Option<Vec<bool>>, Option<Vec<bool>>);
-
-/// Largest fraction of a channel that may sit on an ADC rail before the record is refused.
-const MAX_CLIPPED_FRACTION: f64 = 0.25;
-/// Largest fraction of the voltage that may be clipped: the fits take the voltage as known.
-const MAX_CLIPPED_VOLTAGE: f64 = 0.01;
-
-/// Refuses a record whose clipping hides too much, and warns (unless `quiet`) about the rest:
-/// those samples are left out of the fits. Returns the masks of current and speed, `None` where
-/// nothing is clipped.
-pub fn check_clipping(shown: &str, loaded: &Loaded, quiet: bool) -> Result<ClipMasks> {
-    let report = loaded.clipping_report();
-    let fraction = |m: &[bool]| m.iter().filter(|&&x| x).count() as f64 / m.len().max(1) as f64;
-    let limits = [
-        MAX_CLIPPED_VOLTAGE,
-        MAX_CLIPPED_FRACTION,
-        MAX_CLIPPED_FRACTION,
-    ];
-    let mut line = report.iter();
-    for (c, mask) in loaded.clipped.iter().enumerate() {
-        if mask.iter().any(|&x| x) {
-            let text = line.next().cloned().unwrap_or_default();
-            if fraction(mask) > limits[c] {
-                let what = if c == 0 {
-                    "the fits need the applied voltage"
-                } else {
-                    "too much of the record is lost"
-                };
-                return Err(BadInput(format!(
-                    "{shown}: {text}: {what}; record again with a wider range"
-                ))
-                .into());
-            }
-            if !quiet {
-                eprintln!("warning: {shown}: {text}; those samples are left out of the fit");
-            }
-        }
-    }
-    let mask = |m: &Vec<bool>| m.iter().any(|&x| x).then(|| m.clone());
-    Ok((mask(&loaded.clipped[1]), mask(&loaded.clipped[2])))
-}
-
-/// Reads `path`, finds the step and keeps the samples from it on; clipped samples are left out
-/// of the fits (and a record with too many is refused).
-pub fn load_step(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedStep> {
-    let shown = path.display().to_string();
-    let loaded = read_loaded(path, map, true)?;
-    let (exclude_current, exclude_speed) = check_clipping(&shown, &loaded, quiet)?;
-    let label = file_lines(&shown, &loaded.lines);
-    let mut step = step_from_record_with(label, loaded.record, loaded.voltage_lsb)?;
-    step.inputs.current_lsb_a = loaded.current_lsb.unwrap_or(0.0);
-    step.path = shown;
-    let from = loaded.lines.len() - step.current.len();
-    step.exclude_current = exclude_current.map(|m| m[from..].to_vec());
-    // The encoder speed has no ADC: only a tachometer column can be clipped.
-    if step.position.is_none() {
-        step.exclude_speed = exclude_speed.map(|m| m[from..].to_vec());
-    }
-    Ok(step)
-}
-
-/// Finds the step in a record (named `shown` in errors) and keeps the samples from it on. Speed
-/// (for the paper method's Ωrm) comes from the `position` column ([`encoder_speed`]), else the
-/// `speed` column; the full fit uses the encoder angle where there is one.
-pub fn step_from_record(shown: String, cols: Record) -> Result<LoadedStep> {
-    step_from_record_with(shown, cols, None)
-}
-
-/// [`step_from_record`] with the voltage's ADC step `voltage_lsb` \[V\] if known (a noise-free
-/// quantised step height is known only to ±½ step).
-pub fn step_from_record_with(
-    shown: String,
-    cols: Record,
-    voltage_lsb: Option<f64>,
-) -> Result<LoadedStep> {
-    let loc = locate_step_with(&cols.t, &cols.voltage, voltage_lsb)
-        .map_err(|e| BadInput(format!("{shown}: {e}")))?;
-    let from = loc.index;
-    // Eq. (1)-(2) with Coulomb friction opposing the motion are odd in (E, I, Ω, θ): a
-    // negative step from rest is the mirror image of a positive one, and is fitted as such.
-    let sign = if loc.volts < 0.0 { -1.0 } else { 1.0 };
-    let tail = |v: &[f64]| v[from..].iter().map(|x| sign * x).collect::<Vec<f64>>();
-    // The encoder first, as the paper did (and as the full fit does): a speed column beside it
-    // may be a one-sample difference of the same encoder, quantised to 0 or 157 rad/s at
-    // 100 kHz.
-    let speed = match (&cols.speed, &cols.position) {
-        (_, Some(p)) => Some(tail(&encoder_speed(&cols.t, p))),
-        (Some(s), None) => Some(tail(s)),
-        (None, None) => None,
-    };
-    Ok(LoadedStep {
-        label: shown.clone(),
-        path: shown,
-        volts: sign * loc.volts,
-        mirrored: sign < 0.0,
-        dt: loc.dt,
-        current: tail(&cols.current),
-        speed,
-        position: cols.position.as_deref().map(tail),
-        exclude_current: None,
-        exclude_speed: None,
-        inputs: loc.inputs(),
-    })
-}
-
-/// Shortest time base \[s\] of the speed taken from the encoder for the paper's method: at
-/// 100 kHz a 2000-count encoder moves half a count per sample at 160 rad/s, and the central
-/// difference of one sample reads 0 or 157 rad/s (the last sample is the method's Ωrm).
-const ENCODER_SPEED_BASE_S: f64 = 1e-3;
-
-/// Speed \[rad/s\] from the encoder angle `theta` by differences over ±m samples, m the
-/// fewest that span [`ENCODER_SPEED_BASE_S`] (m = 1, the central difference, at 1 kHz and
-/// below); one-sided near the ends.
-fn encoder_speed(t: &[f64], theta: &[f64]) -> Vec<f64> {
-    let n = t.len().min(theta.len());
-    let dt = motor_model::mean_period(t);
-    let m = if dt > 0.0 {
-        ((0.5 * ENCODER_SPEED_BASE_S / dt).ceil() as usize).max(1)
-    } else {
-        1
-    };
-    if m == 1 {
-        return central_difference(t, theta);
-    }
-    (0..n)
-        .map(|i| {
-            let (a, b) = (i.saturating_sub(m), (i + m).min(n - 1));
-            (theta[b] - theta[a]) / (t[b] - t[a])
-        })
-        .collect()
-}
 
 /// `x` with 7 significant digits, in plain or scientific notation as suits its size.
 fn sig(x: f64) -> String {
@@ -237,13 +61,11 @@ pub fn report_json(
         (None, Ok(p)) => p.params,
         (None, Err(_)) => return Value::Null,
     };
-    let v = params.values();
     let mut parameters = serde_json::Map::new();
-    for i in 0..6 {
-        let ci = full.and_then(|f| f.ci95).map(|c| json!(c[i]));
+    for p in parameter_estimates(&params, full.and_then(|f| f.ci95.as_ref())) {
         parameters.insert(
-            PARAM_NAMES[i].into(),
-            json!({"value": v[i], "ci95": ci, "unit": PARAM_UNITS[i]}),
+            p.name.into(),
+            json!({"value": p.value, "ci95": p.ci95, "unit": p.unit}),
         );
     }
     let quality = match full {
@@ -284,18 +106,20 @@ pub fn report_json(
     })
 }
 
+/// The table of `identify`: parameters with intervals, derived constants, fit quality, and
+/// `note` (why the full fit did not start from the paper's method) if any.
 fn print_table(
     method: &str,
     paper: Result<&PaperIdentification, &str>,
     full: Option<&FullFit>,
     files: &[&str],
+    note: Option<&str>,
 ) {
     let params = match (full, paper) {
         (Some(f), _) => f.params,
         (None, Ok(p)) => p.params,
         (None, Err(_)) => return,
     };
-    let v = params.values();
     match method {
         "full" => println!("full model: R, L, k, f, J, Ts fitted jointly to both records (exact response, breakaway included)"),
         "paper" => println!("paper method: fit of Eq. (33), then Eqs. (34)-(51) (the method gives no confidence intervals)"),
@@ -303,23 +127,19 @@ fn print_table(
     }
     println!("      {:>12}   {:<27} unit", "value", "95% CI");
     let mut poorly = Vec::new();
-    for i in 0..6 {
-        let ci = full.and_then(|f| f.ci95).map(|c| c[i]);
-        let ci_text = ci.map_or("-".to_string(), |[lo, hi]| {
+    for p in parameter_estimates(&params, full.and_then(|f| f.ci95.as_ref())) {
+        let ci_text = p.ci95.map_or("-".to_string(), |[lo, hi]| {
             format!("[{}, {}]", sig(lo), sig(hi))
         });
-        if let Some([lo, hi]) = ci {
-            let rel = 0.5 * (hi - lo) / v[i];
-            if rel > POORLY_DETERMINED {
-                poorly.push(format!("{} (±{:.0} %)", PARAM_NAMES[i], 100.0 * rel));
-            }
+        if let (true, Some(rel)) = (p.poorly_determined(), p.relative_half_width()) {
+            poorly.push(format!("{} (±{:.0} %)", p.name, 100.0 * rel));
         }
         println!(
             "  {:<3} {:>12}   {:<27} {}",
-            PARAM_NAMES[i],
-            sig(v[i]),
+            p.name,
+            sig(p.value),
             ci_text,
-            PARAM_UNITS[i]
+            p.unit
         );
     }
     let d = Derived::new(&params);
@@ -369,14 +189,14 @@ fn print_table(
             Err(e) => println!("(C.8) speed check not made: {e}"),
         }
     }
-    if let (Err(why), Some(_), "full") = (paper, full, method) {
+    if let Some(why) = note {
         println!("note: the paper's method does not apply to these records ({why}); the full fit started from the steady states instead");
     }
     if !poorly.is_empty() {
         println!(
             "warning: poorly determined by these records: {} — the 95% interval is wider than {:.0} % of the value",
             poorly.join(", "),
-            100.0 * POORLY_DETERMINED
+            100.0 * fit::POORLY_DETERMINED
         );
     }
 }
@@ -393,11 +213,7 @@ fn run_steady(a: &IdentifyArgs) -> Result<()> {
         // The current alone can look steady at its peak: check the speed too where it is
         // recorded.
         let label = file_lines(&path.display().to_string(), &loaded.lines);
-        let speed = match (&cols.position, &cols.speed) {
-            (Some(p), _) => Some(central_difference(&cols.t, p)),
-            (None, Some(w)) => Some(w.clone()),
-            (None, None) => None,
-        };
+        let speed = record_speed(&cols.t, cols.speed.as_deref(), cols.position.as_deref());
         let advice =
             "Eq. (8) needs the steady state — record longer (several mechanical time constants)";
         fit::check_settled_for(&label, "current", &cols.current, dt, advice)
@@ -406,13 +222,10 @@ fn run_steady(a: &IdentifyArgs) -> Result<()> {
                 None => Ok(()),
             })
             .map_err(|e| BadInput(e.to_string()))?;
-        // Steady values: medians of the last tenth of the record.
-        let tail = |v: &[f64]| {
-            let mut t = v[v.len() - (v.len() / 10).max(1)..].to_vec();
-            let mid = t.len() / 2;
-            *t.select_nth_unstable_by(mid, f64::total_cmp).1
+        let (Some(e), Some(ir)) = (steady_value(&cols.voltage), steady_value(&cols.current)) else {
+            return Err(BadInput(format!("{label}: no samples")).into());
         };
-        tests.push((tail(&cols.voltage), tail(&cols.current)));
+        tests.push((e, ir));
     }
     let fit = fit_apparent_resistance(&tests, r, k).map_err(|e| BadInput(e.to_string()))?;
     if a.json {
@@ -507,31 +320,32 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
     let dt = motor_model::mean_period(&rec.t);
     // The torque constant: given, or from the voltage equation (2a) when the armature voltage
     // is recorded.
-    let (k, k_source) = match a.torque_constant {
-        Some(k) if k.is_finite() && k > 0.0 => (k, "given"),
-        Some(k) => {
-            return Err(BadInput(format!("--torque-constant {k}: expected a positive number")).into())
-        }
-        None if !rec.voltage.is_empty() => {
-            let input = voltage_input(&rec.t, &rec.voltage)
-                .map_err(|e| BadInput(format!("{shown}: {e}")))?;
-            let excited = ExcitedRecord {
-                input: &input,
-                dt,
-                current: &rec.current,
-                speed: None,
-                position: Some(position),
-                exclude_current: None,
-                exclude_speed: None,
-            };
-            let [_, _, k] = electrical_equation(&[excited], a.cutoff * dt)
-                .map_err(|e| BadInput(format!("{shown}: k from the voltage: {e} (give --torque-constant K)")))?;
-            (k, "voltage equation (2a)")
-        }
-        None => {
-            return Err(BadInput("--input current needs --torque-constant K (the torque or force per unit of the current column) or a voltage column to estimate it from".into()).into())
-        }
+    let input = match a.torque_constant {
+        None if !rec.voltage.is_empty() => Some(
+            voltage_input(&rec.t, &rec.voltage).map_err(|e| BadInput(format!("{shown}: {e}")))?,
+        ),
+        _ => None,
     };
+    let excited = input.as_ref().map(|input| ExcitedRecord {
+        input,
+        dt,
+        current: &rec.current,
+        speed: None,
+        position: Some(position),
+        exclude_current: None,
+        exclude_speed: None,
+    });
+    let (k, k_source) = torque_constant(a.torque_constant, excited.as_ref(), a.cutoff * dt)
+        .map_err(|e| match e {
+            TorqueConstantError::NotPositive(k) => {
+                BadInput(format!("--torque-constant {k}: expected a positive number"))
+            }
+            TorqueConstantError::VoltageEquation(e) => BadInput(format!(
+                "{shown}: k from the voltage: {e} (give --torque-constant K)"
+            )),
+            _ => BadInput("--input current needs --torque-constant K (the torque or force per unit of the current column) or a voltage column to estimate it from".into()),
+        })?;
+    let k_source = k_source.text();
     let torque: Vec<f64> = rec.current.iter().map(|i| k * i).collect();
     let settings = InverseModelSettings {
         position_cutoff_hz: a.cutoff,
@@ -552,12 +366,7 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
             anyhow::bail!("the inverse model returned no fitted samples");
         };
         let t: Vec<f64> = f.t_s.iter().map(|s| rec.t[0] + s).collect();
-        let residual: Vec<f64> = f
-            .measured
-            .iter()
-            .zip(&f.model)
-            .map(|(y, m)| y - m)
-            .collect();
+        let residual = crate::plot::residual(&f.measured, &f.model);
         let (torque_label, residual_label) = match a.axis {
             AxisArg::Rotary => ("torque k·I [N·m]", "torque residual [N·m]"),
             AxisArg::Linear => ("force k·I [N]", "force residual [N]"),
@@ -602,12 +411,29 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
             }
         }
     }
+    // J (or M), f, Ts and the offset with their names, intervals and units.
+    let axis = fit.axis();
+    let values = [
+        axis.mass_kg,
+        axis.viscous_ns_per_m,
+        axis.coulomb_n,
+        axis.offset_n,
+    ];
+    let intervals: [Option<[f64; 2]>; 4] = fit.ci95.map_or([None; 4], |c| c.map(Some));
+    let rows = || {
+        MECHANICAL_NAMES
+            .iter()
+            .zip(values)
+            .zip(intervals)
+            .zip(units)
+            .map(|(((name, value), ci), unit)| (*name, value, ci, unit))
+    };
     if a.json {
         let mut parameters = serde_json::Map::new();
-        for i in 0..4 {
+        for (name, value, ci, unit) in rows() {
             parameters.insert(
-                MECHANICAL_NAMES[i].into(),
-                json!({"value": fit.values[i], "ci95": fit.ci95.map(|c| c[i]), "unit": units[i]}),
+                name.into(),
+                json!({"value": value, "ci95": ci, "unit": unit}),
             );
         }
         let report = json!({
@@ -635,17 +461,11 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
         println!("torque constant k = {} from the {k_source}", sig(k));
     }
     println!("      {:>12}   {:<27} unit", "value", "95% CI");
-    for i in 0..4 {
-        let ci = fit.ci95.map_or("-".to_string(), |c| {
-            format!("[{}, {}]", sig(c[i][0]), sig(c[i][1]))
+    for (name, value, ci, unit) in rows() {
+        let ci = ci.map_or("-".to_string(), |[lo, hi]| {
+            format!("[{}, {}]", sig(lo), sig(hi))
         });
-        println!(
-            "  {:<6} {:>12}   {:<27} {}",
-            MECHANICAL_NAMES[i],
-            sig(fit.values[i]),
-            ci,
-            units[i]
-        );
+        println!("  {name:<6} {:>12}   {ci:<27} {unit}", sig(value));
     }
     println!(
         "fit: {} samples after decimation by {}, torque residual RMS {}, fit {:.2} %",
@@ -668,7 +488,7 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
         return run_records(a);
     }
     if let Some(dir) = &a.batch {
-        return crate::commands::batch::run(a, dir);
+        return batch::run(a, dir);
     }
     let (Some(high), Some(low)) = (&a.high, &a.low) else {
         return Err(BadInput(
@@ -717,132 +537,31 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
             hv.current.len() + lv.current.len()
         );
     }
-    let (paper, full) = identify_pair(&hv, &lv, a.method)?;
+    let result = identify_pair(&hv, &lv, settings::step_method(a.method))?;
     if long {
         eprintln!("done in {:.1} s", clock.elapsed().as_secs_f64());
     }
-    let paper = paper.as_ref().map_err(String::as_str);
-    let method = match a.method {
-        MethodArg::Paper => "paper",
-        MethodArg::Full => "full",
-    };
+    let why = result.paper.as_ref().map_err(ToString::to_string);
+    let paper = why.as_ref().copied().map_err(String::as_str);
+    let method = result.route.method_name();
+    let full = result.full.as_ref();
     if a.json {
         println!(
             "{}",
-            serde_json::to_string_pretty(&report_json(method, paper, full.as_ref(), &files))?
+            serde_json::to_string_pretty(&report_json(method, paper, full, &files))?
         );
     } else {
-        print_table(method, paper, full.as_ref(), &files);
+        let note = result.note().map(ToString::to_string);
+        print_table(method, paper, full, &files, note.as_deref());
     }
-    if let (Some(dir), Some(f)) = (&a.plot, &full) {
+    if let (Some(dir), Some(f)) = (&a.plot, full) {
         let records = [high, low]
             .iter()
             .map(|p| load_excited(p, &map, true))
             .collect::<Result<Vec<_>>>()?;
-        crate::commands::figures::fit_figures(dir, &records, &f.params, a.quiet)?;
+        crate::figures::fit_figures(dir, &records, &f.params, a.quiet)?;
     }
-    converged(full.as_ref())
-}
-
-/// A record of any excitation, read and checked: owns what [`ExcitedRecord`] borrows.
-pub struct LoadedExcited {
-    /// File it came from.
-    pub path: String,
-    /// The file with the line span of its samples, for errors.
-    pub label: String,
-    /// The record (SI units).
-    pub record: Record,
-    /// The voltage waveform rebuilt from the voltage column, time from the first sample.
-    pub input: Input,
-    /// What the record leaves unknown about each level of `input` (empty for a replayed one).
-    pub priors: Vec<LevelPrior>,
-    dt: f64,
-    exclude_current: Option<Vec<bool>>,
-    exclude_speed: Option<Vec<bool>>,
-}
-
-impl LoadedExcited {
-    /// The identification's view of the record.
-    pub fn excited(&self) -> ExcitedRecord<'_> {
-        ExcitedRecord {
-            input: &self.input,
-            dt: self.dt,
-            current: &self.record.current,
-            speed: self.record.speed.as_deref(),
-            position: self.record.position.as_deref(),
-            exclude_current: self.exclude_current.as_deref(),
-            exclude_speed: self.exclude_speed.as_deref(),
-        }
-    }
-}
-
-/// Reads a record of any voltage waveform for the output-error fit.
-pub fn load_excited(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedExcited> {
-    let shown = path.display().to_string();
-    let loaded = read_loaded(path, map, true)?;
-    let (exclude_current, exclude_speed) = check_clipping(&shown, &loaded, quiet)?;
-    let label = file_lines(&shown, &loaded.lines);
-    let header_line = loaded.lines.first().map_or(1, |l| l.saturating_sub(1));
-    let rec = loaded.record;
-    if rec.speed.is_none() && rec.position.is_none() {
-        return Err(BadInput(format!(
-            "{shown}:{header_line}: neither speed nor position: k, f, J and Ts need one of them"
-        ))
-        .into());
-    }
-    let (input, priors) = voltage_levels(&rec.t, &rec.voltage, loaded.voltage_lsb)
-        .map_err(|e| BadInput(format!("{label}: {e}")))?;
-    if input.peak_volts() == 0.0 {
-        return Err(BadInput(format!(
-            "{label}: the voltage is 0 V throughout: nothing drives the motor"
-        ))
-        .into());
-    }
-    let dt = motor_model::mean_period(&rec.t);
-    Ok(LoadedExcited {
-        path: shown,
-        label,
-        input,
-        priors,
-        dt,
-        exclude_current,
-        exclude_speed: if rec.position.is_some() {
-            None
-        } else {
-            exclude_speed
-        },
-        record: rec,
-    })
-}
-
-/// `file:a-b`: a file and the lines of its samples, for errors about a whole record.
-pub fn file_lines(shown: &str, lines: &[usize]) -> String {
-    format!(
-        "{shown}:{}-{}",
-        lines.first().copied().unwrap_or(0),
-        lines.last().copied().unwrap_or(0)
-    )
-}
-
-/// The output-error fit of `loaded` from `start`, or from the equation-error start when none is
-/// given; errors name `label`, and a failed start adds `start_hint`. Returns the start used and
-/// the fit.
-pub fn fit_excited(
-    loaded: &[LoadedExcited],
-    start: Option<MotorParams>,
-    label: &str,
-    start_hint: &str,
-) -> Result<(MotorParams, FullFit)> {
-    let records: Vec<ExcitedRecord> = loaded.iter().map(LoadedExcited::excited).collect();
-    let start = match start {
-        Some(s) => s,
-        None => equation_error_start(&records)
-            .map_err(|e| BadInput(format!("{label}: {e}{start_hint}")))?,
-    };
-    let priors: Vec<Vec<LevelPrior>> = loaded.iter().map(|l| l.priors.clone()).collect();
-    let full = identify_output_error_with_inputs(&records, &priors, &start, LmSettings::default())
-        .map_err(|e| BadInput(format!("{label}: {e}")))?;
-    Ok((start, full))
+    converged(full)
 }
 
 /// `--record A.csv --record B.csv ...`: all six parameters by output error.
@@ -859,7 +578,7 @@ fn run_records(a: &IdentifyArgs) -> Result<()> {
         .map(|l| l.label.as_str())
         .collect::<Vec<_>>()
         .join(" / ");
-    let given = a.start.as_deref().map(crate::settings::motor).transpose()?;
+    let given = a.start.as_deref().map(settings::motor).transpose()?;
     let samples: usize = loaded.iter().map(|l| l.record.t.len()).sum();
     let clock = std::time::Instant::now();
     // About a second of fitting on this kind of machine: progress from there on.
@@ -896,10 +615,10 @@ fn run_records(a: &IdentifyArgs) -> Result<()> {
         }
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        print_table("output_error", Err(""), Some(&full), &files);
+        print_table("output_error", Err(""), Some(&full), &files, None);
     }
     if let Some(dir) = &a.plot {
-        crate::commands::figures::fit_figures(dir, &loaded, &full.params, a.quiet)?;
+        crate::figures::fit_figures(dir, &loaded, &full.params, a.quiet)?;
     }
     converged(Some(&full))
 }
@@ -910,60 +629,6 @@ fn column_map(a: &IdentifyArgs) -> Result<ColumnMap> {
         Some(text) => ColumnMap::parse(text),
         None => Ok(ColumnMap::default()),
     }
-}
-
-/// The pair with the higher step first (the paper's method needs it: Eq. (33) is the high-voltage
-/// approximation), and a note when the records were given the other way round.
-pub fn in_order(hv: LoadedStep, lv: LoadedStep) -> (LoadedStep, LoadedStep, Option<String>) {
-    if lv.volts > hv.volts {
-        let note = format!(
-            "--high {} steps to {:.4} V, below --low {} at {:.4} V: taken the other way round",
-            hv.label, hv.volts, lv.label, lv.volts
-        );
-        (lv, hv, Some(note))
-    } else {
-        (hv, lv, None)
-    }
-}
-
-/// Identifies a high- and a low-voltage step record: the paper's method (unless clipped
-/// samples rule it out), then with `MethodArg::Full` the full model started from it (or from
-/// the steady states where it does not apply).
-pub fn identify_pair(
-    hv: &LoadedStep,
-    lv: &LoadedStep,
-    method: MethodArg,
-) -> Result<(
-    std::result::Result<PaperIdentification, String>,
-    Option<FullFit>,
-)> {
-    let tests = [hv.test(), lv.test()];
-    let settings = LmSettings::default();
-    let both = format!("{} / {}", hv.label, lv.label);
-    let paper = if hv.has_clipping() || lv.has_clipping() {
-        Err(
-            "clipped samples: the paper's method reads the whole current and its steady values"
-                .to_string(),
-        )
-    } else {
-        identify_paper(&tests[0], &tests[1], settings).map_err(|e| e.to_string())
-    };
-    let full = match (method, &paper) {
-        (MethodArg::Paper, Err(e)) => return Err(BadInput(format!("{both}: {e}")).into()),
-        (MethodArg::Paper, Ok(_)) => None,
-        (MethodArg::Full, _) => {
-            let start = match &paper {
-                Ok(p) => p.params,
-                Err(_) => steady_state_start(&tests[0], &tests[1])
-                    .map_err(|e| BadInput(format!("{both}: {e}")))?,
-            };
-            Some(
-                identify_full_with_inputs(&tests, &[hv.inputs, lv.inputs], &start, settings)
-                    .map_err(|e| BadInput(format!("{both}: {e}")))?,
-            )
-        }
-    };
-    Ok((paper, full))
 }
 
 /// Exit status of a full fit: [`NotConverged`] with the reason when the solver gave up or the

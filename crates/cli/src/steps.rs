@@ -1,0 +1,284 @@
+//! Records read for the identification: step records located and mirrored, records of any
+//! excitation with their voltage rebuilt, clipped samples judged by the library's policy; and
+//! the calls into the identification pipelines with errors that name the files.
+
+use std::path::Path;
+
+use anyhow::Result;
+use fit::{
+    equation_error_start, identify_output_error_with_inputs, identify_step_pair, judge_clipping,
+    locate_step_with, record_speed, voltage_levels, ClippingVerdict, ExcitedRecord, FullFit,
+    LevelPrior, LmSettings, RecordChannel, StepInputs, StepMethod, StepPairIdentification,
+    StepRecord, StepTest,
+};
+use motor_model::{Input, MotorParams, Record};
+
+use crate::record_csv::{read_loaded, ColumnMap, Loaded};
+use crate::BadInput;
+
+/// A step record read and located: owns the columns the [`StepTest`] borrows.
+pub struct LoadedStep {
+    /// File it came from.
+    pub path: String,
+    /// The file with the line span of its samples (`hv.csv:7-50007`), for errors.
+    pub label: String,
+    /// Step height \[V\] (positive: a negative step is mirrored).
+    pub volts: f64,
+    /// Whether the step was negative: its channels are kept with their signs reversed.
+    pub mirrored: bool,
+    dt: f64,
+    /// Armature current from the step on \[A\].
+    pub current: Vec<f64>,
+    speed: Option<Vec<f64>>,
+    position: Option<Vec<f64>>,
+    exclude_current: Option<Vec<bool>>,
+    exclude_speed: Option<Vec<bool>>,
+    /// What the record leaves unknown about the step (height and instant).
+    pub inputs: StepInputs,
+}
+
+impl LoadedStep {
+    /// The identification's view of the record.
+    pub fn test(&self) -> StepTest<'_> {
+        StepTest {
+            volts: self.volts,
+            t_first: 0.0,
+            dt: self.dt,
+            current: &self.current,
+            speed: self.speed.as_deref(),
+            position: self.position.as_deref(),
+            exclude_current: self.exclude_current.as_deref(),
+            exclude_speed: self.exclude_speed.as_deref(),
+        }
+    }
+
+    /// The step-pair pipeline's view of the record: the test and its uncertain inputs.
+    pub fn step_record(&self) -> StepRecord<'_> {
+        StepRecord {
+            test: self.test(),
+            inputs: self.inputs,
+        }
+    }
+}
+
+/// Samples of current and speed to leave out, `None` where nothing is clipped.
+pub struct ClipMasks {
+    /// Current samples at an ADC rail.
+    pub current: Option<Vec<bool>>,
+    /// Tachometer samples at an ADC rail.
+    pub speed: Option<Vec<bool>>,
+}
+
+/// Refuses a record whose clipping hides too much ([`fit::judge_clipping`]), and warns (unless
+/// `quiet`) about the rest: those samples are left out of the fits.
+pub fn check_clipping(shown: &str, loaded: &Loaded, quiet: bool) -> Result<ClipMasks> {
+    let report = loaded.clipping_report();
+    let mut line = report.iter();
+    for (channel, mask) in loaded.clipped_channels() {
+        let verdict = judge_clipping(channel, mask);
+        if verdict == ClippingVerdict::Clean {
+            continue;
+        }
+        let text = line.next().cloned().unwrap_or_default();
+        if let ClippingVerdict::Refused { reason } = verdict {
+            return Err(BadInput(format!(
+                "{shown}: {text}: {reason}; record again with a wider range"
+            ))
+            .into());
+        }
+        if !quiet {
+            eprintln!("warning: {shown}: {text}; those samples are left out of the fit");
+        }
+    }
+    let mask = |m: &[bool]| m.iter().any(|&x| x).then(|| m.to_vec());
+    Ok(ClipMasks {
+        current: mask(loaded.clipped_mask(RecordChannel::Current)),
+        speed: mask(loaded.clipped_mask(RecordChannel::Speed)),
+    })
+}
+
+/// Reads `path`, finds the step and keeps the samples from it on; clipped samples are left out
+/// of the fits (and a record with too many is refused).
+pub fn load_step(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedStep> {
+    let shown = path.display().to_string();
+    let loaded = read_loaded(path, map, true)?;
+    let masks = check_clipping(&shown, &loaded, quiet)?;
+    let label = file_lines(&shown, &loaded.lines);
+    let mut step = step_from_record_with(label, loaded.record, loaded.voltage_lsb)?;
+    step.inputs.current_lsb_a = loaded.current_lsb.unwrap_or(0.0);
+    step.path = shown;
+    let from = loaded.lines.len() - step.current.len();
+    step.exclude_current = masks.current.map(|m| m[from..].to_vec());
+    // The encoder speed has no ADC: only a tachometer column can be clipped.
+    if step.position.is_none() {
+        step.exclude_speed = masks.speed.map(|m| m[from..].to_vec());
+    }
+    Ok(step)
+}
+
+/// Finds the step in a record (named `shown` in errors) and keeps the samples from it on. Speed
+/// (for the paper method's Ωrm) comes from the `position` column, else the `speed` column
+/// ([`fit::record_speed`]); the full fit uses the encoder angle where there is one.
+pub fn step_from_record(shown: String, cols: Record) -> Result<LoadedStep> {
+    step_from_record_with(shown, cols, None)
+}
+
+/// [`step_from_record`] with the voltage's ADC step `voltage_lsb` \[V\] if known (a noise-free
+/// quantised step height is known only to ±½ step).
+pub fn step_from_record_with(
+    shown: String,
+    cols: Record,
+    voltage_lsb: Option<f64>,
+) -> Result<LoadedStep> {
+    let loc = locate_step_with(&cols.t, &cols.voltage, voltage_lsb)
+        .map_err(|e| BadInput(format!("{shown}: {e}")))?;
+    let from = loc.index;
+    // Eq. (1)-(2) with Coulomb friction opposing the motion are odd in (E, I, Ω, θ): a
+    // negative step from rest is the mirror image of a positive one, and is fitted as such.
+    let sign = if loc.volts < 0.0 { -1.0 } else { 1.0 };
+    let tail = |v: &[f64]| v[from..].iter().map(|x| sign * x).collect::<Vec<f64>>();
+    let speed = record_speed(&cols.t, cols.speed.as_deref(), cols.position.as_deref());
+    Ok(LoadedStep {
+        label: shown.clone(),
+        path: shown,
+        volts: sign * loc.volts,
+        mirrored: sign < 0.0,
+        dt: loc.dt,
+        current: tail(&cols.current),
+        speed: speed.as_deref().map(tail),
+        position: cols.position.as_deref().map(tail),
+        exclude_current: None,
+        exclude_speed: None,
+        inputs: loc.inputs(),
+    })
+}
+
+/// The pair with the higher step first (the paper's method needs it: Eq. (33) is the high-voltage
+/// approximation), and a note when the records were given the other way round.
+pub fn in_order(hv: LoadedStep, lv: LoadedStep) -> (LoadedStep, LoadedStep, Option<String>) {
+    if lv.volts > hv.volts {
+        let note = format!(
+            "--high {} steps to {:.4} V, below --low {} at {:.4} V: taken the other way round",
+            hv.label, hv.volts, lv.label, lv.volts
+        );
+        (lv, hv, Some(note))
+    } else {
+        (hv, lv, None)
+    }
+}
+
+/// [`fit::identify_step_pair`] on a high- and a low-voltage step record, errors naming both.
+pub fn identify_pair(
+    hv: &LoadedStep,
+    lv: &LoadedStep,
+    method: StepMethod,
+) -> Result<StepPairIdentification> {
+    identify_step_pair(
+        &hv.step_record(),
+        &lv.step_record(),
+        method,
+        LmSettings::default(),
+    )
+    .map_err(|e| BadInput(format!("{} / {}: {e}", hv.label, lv.label)).into())
+}
+
+/// A record of any excitation, read and checked: owns what [`ExcitedRecord`] borrows.
+pub struct LoadedExcited {
+    /// File it came from.
+    pub path: String,
+    /// The file with the line span of its samples, for errors.
+    pub label: String,
+    /// The record (SI units).
+    pub record: Record,
+    /// The voltage waveform rebuilt from the voltage column, time from the first sample.
+    pub input: Input,
+    /// What the record leaves unknown about each level of `input` (empty for a replayed one).
+    pub priors: Vec<LevelPrior>,
+    dt: f64,
+    exclude_current: Option<Vec<bool>>,
+    exclude_speed: Option<Vec<bool>>,
+}
+
+impl LoadedExcited {
+    /// The identification's view of the record.
+    pub fn excited(&self) -> ExcitedRecord<'_> {
+        ExcitedRecord {
+            input: &self.input,
+            dt: self.dt,
+            current: &self.record.current,
+            speed: self.record.speed.as_deref(),
+            position: self.record.position.as_deref(),
+            exclude_current: self.exclude_current.as_deref(),
+            exclude_speed: self.exclude_speed.as_deref(),
+        }
+    }
+}
+
+/// Reads a record of any voltage waveform for the output-error fit.
+pub fn load_excited(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedExcited> {
+    let shown = path.display().to_string();
+    let loaded = read_loaded(path, map, true)?;
+    let masks = check_clipping(&shown, &loaded, quiet)?;
+    let label = file_lines(&shown, &loaded.lines);
+    let header_line = loaded.lines.first().map_or(1, |l| l.saturating_sub(1));
+    let rec = loaded.record;
+    if rec.speed.is_none() && rec.position.is_none() {
+        return Err(BadInput(format!(
+            "{shown}:{header_line}: neither speed nor position: k, f, J and Ts need one of them"
+        ))
+        .into());
+    }
+    let (input, priors) = voltage_levels(&rec.t, &rec.voltage, loaded.voltage_lsb)
+        .map_err(|e| BadInput(format!("{label}: {e}")))?;
+    if input.peak_volts() == 0.0 {
+        return Err(BadInput(format!(
+            "{label}: the voltage is 0 V throughout: nothing drives the motor"
+        ))
+        .into());
+    }
+    let dt = motor_model::mean_period(&rec.t);
+    Ok(LoadedExcited {
+        path: shown,
+        label,
+        input,
+        priors,
+        dt,
+        exclude_current: masks.current,
+        exclude_speed: if rec.position.is_some() {
+            None
+        } else {
+            masks.speed
+        },
+        record: rec,
+    })
+}
+
+/// `file:a-b`: a file and the lines of its samples, for errors about a whole record.
+pub fn file_lines(shown: &str, lines: &[usize]) -> String {
+    format!(
+        "{shown}:{}-{}",
+        lines.first().copied().unwrap_or(0),
+        lines.last().copied().unwrap_or(0)
+    )
+}
+
+/// The output-error fit of `loaded` from `start`, or from the equation-error start when none is
+/// given; errors name `label`, and a failed start adds `start_hint`. Returns the start used and
+/// the fit.
+pub fn fit_excited(
+    loaded: &[LoadedExcited],
+    start: Option<MotorParams>,
+    label: &str,
+    start_hint: &str,
+) -> Result<(MotorParams, FullFit)> {
+    let records: Vec<ExcitedRecord> = loaded.iter().map(LoadedExcited::excited).collect();
+    let start = match start {
+        Some(s) => s,
+        None => equation_error_start(&records)
+            .map_err(|e| BadInput(format!("{label}: {e}{start_hint}")))?,
+    };
+    let priors: Vec<Vec<LevelPrior>> = loaded.iter().map(|l| l.priors.clone()).collect();
+    let full = identify_output_error_with_inputs(&records, &priors, &start, LmSettings::default())
+        .map_err(|e| BadInput(format!("{label}: {e}")))?;
+    Ok((start, full))
+}

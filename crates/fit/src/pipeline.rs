@@ -1,0 +1,599 @@
+//! The step-pair identification as one call: the paper's method (Sec. 3, Eqs. (33)–(51)),
+//! else — or after it — the full model started from its result or from the steady states;
+//! with the policies around it that a front end must not redo: which clipped records are
+//! accepted, the steady value of a settled record, which intervals are too wide to trust, and
+//! the torque constant of a current-driven axis.
+//!
+//! Results come back as data (parameters with names, units and intervals, the route taken,
+//! notes); nothing is printed.
+
+use std::fmt;
+
+use motor_model::MotorParams;
+
+use crate::error::FitError;
+use crate::full_model::{identify_full_with_inputs, FullFit, StepTest, PARAM_NAMES, PARAM_UNITS};
+use crate::input_uncertainty::StepInputs;
+use crate::lm::LmSettings;
+use crate::output_error::{electrical_equation, ExcitedRecord};
+use crate::paper_method::{identify_paper, PaperIdentification};
+use crate::start::steady_state_start;
+
+/// How a step pair is identified.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum StepMethod {
+    /// The paper's method alone (Eqs. (33)–(51)); it gives no confidence intervals.
+    Paper,
+    /// The full model (R, L, k, f, J, Ts jointly, exact response) started from the paper's
+    /// method, or from the steady states where that method does not apply.
+    Full,
+}
+
+/// One step record as the pipeline reads it.
+#[derive(Debug, Clone, Copy)]
+pub struct StepRecord<'a> {
+    /// The record from the step on.
+    pub test: StepTest<'a>,
+    /// What the record leaves unknown about the step (height, instant, current LSB).
+    pub inputs: StepInputs,
+}
+
+impl StepRecord<'_> {
+    /// Whether any sample of the record is left out as clipped.
+    pub fn has_clipping(&self) -> bool {
+        self.test.exclude_current.is_some() || self.test.exclude_speed.is_some()
+    }
+}
+
+/// Why the paper's method gave no result.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum PaperSkipped {
+    /// A record has clipped samples: the method reads the whole current and its steady values.
+    Clipped,
+    /// The method refused the records (e.g. an underdamped response, Eqs. (35)–(37)).
+    Failed(FitError),
+}
+
+impl fmt::Display for PaperSkipped {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            PaperSkipped::Clipped => f.write_str(
+                "clipped samples: the paper's method reads the whole current and its steady values",
+            ),
+            PaperSkipped::Failed(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+/// Which route the step-pair pipeline took.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum StepRoute {
+    /// The paper's method alone ([`StepMethod::Paper`]).
+    Paper,
+    /// The full model started from the paper's result.
+    FullFromPaper,
+    /// The full model started from the steady states ([`steady_state_start`]): the paper's
+    /// method did not apply.
+    FullFromSteadyStates,
+}
+
+impl StepRoute {
+    /// The method's name in reports: `paper` or `full`.
+    pub fn method_name(self) -> &'static str {
+        match self {
+            StepRoute::Paper => "paper",
+            StepRoute::FullFromPaper | StepRoute::FullFromSteadyStates => "full",
+        }
+    }
+}
+
+/// Why the step-pair pipeline gave no result.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum StepPairError {
+    /// [`StepMethod::Paper`] was asked for and the paper's method does not apply.
+    Paper(PaperSkipped),
+    /// No start for the full fit: the steady states refused the records.
+    Start(FitError),
+    /// The full fit refused the records.
+    Full(FitError),
+}
+
+impl fmt::Display for StepPairError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            StepPairError::Paper(e) => write!(f, "{e}"),
+            StepPairError::Start(e) | StepPairError::Full(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl std::error::Error for StepPairError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            StepPairError::Paper(PaperSkipped::Failed(e))
+            | StepPairError::Start(e)
+            | StepPairError::Full(e) => Some(e),
+            StepPairError::Paper(_) => None,
+        }
+    }
+}
+
+/// A parameter as identified: name, unit, value and 95 % interval.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParameterEstimate {
+    /// Name as in [`PARAM_NAMES`] (`R`, `L`, `k`, `f`, `J`, `Ts`).
+    pub name: &'static str,
+    /// SI unit as in [`PARAM_UNITS`].
+    pub unit: &'static str,
+    /// The value (SI units).
+    pub value: f64,
+    /// The 95 % interval `[lo, hi]` (SI units), if the method gives one.
+    pub ci95: Option<[f64; 2]>,
+}
+
+/// The six parameters of `params` with names, units and, if given, the 95 % intervals `ci95`
+/// (in the order of [`PARAM_NAMES`]).
+pub fn parameter_estimates(
+    params: &MotorParams,
+    ci95: Option<&[[f64; 2]; 6]>,
+) -> Vec<ParameterEstimate> {
+    let values = params.values();
+    (0..values.len())
+        .map(|i| ParameterEstimate {
+            name: PARAM_NAMES[i],
+            unit: PARAM_UNITS[i],
+            value: values[i],
+            ci95: ci95.map(|c| c[i]),
+        })
+        .collect()
+}
+
+/// A 95 % interval wider than this fraction of the value (half-width over value) marks a
+/// poorly determined parameter.
+pub const POORLY_DETERMINED: f64 = 0.1;
+
+impl ParameterEstimate {
+    /// Half the 95 % interval over the value \[-\], if there is an interval.
+    pub fn relative_half_width(&self) -> Option<f64> {
+        self.ci95.map(|[lo, hi]| 0.5 * (hi - lo) / self.value)
+    }
+
+    /// Whether the records leave the parameter poorly determined: its
+    /// [`relative_half_width`](Self::relative_half_width) exceeds [`POORLY_DETERMINED`].
+    pub fn poorly_determined(&self) -> bool {
+        self.relative_half_width()
+            .is_some_and(|rel| rel > POORLY_DETERMINED)
+    }
+}
+
+/// What the step-pair pipeline found: the paper's result (or why there is none), the full fit
+/// if one ran, and the route taken.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepPairIdentification {
+    /// The paper's method, or why it gave no result.
+    pub paper: Result<PaperIdentification, PaperSkipped>,
+    /// The full fit, with [`StepMethod::Full`].
+    pub full: Option<FullFit>,
+    /// Which route was taken.
+    pub route: StepRoute,
+}
+
+impl StepPairIdentification {
+    /// The identified motor: the full fit's, else the paper's.
+    pub fn params(&self) -> Option<MotorParams> {
+        match (&self.full, &self.paper) {
+            (Some(f), _) => Some(f.params),
+            (None, Ok(p)) => Some(p.params),
+            (None, Err(_)) => None,
+        }
+    }
+
+    /// The identified parameters with names, units and (from the full fit) 95 % intervals.
+    pub fn estimates(&self) -> Vec<ParameterEstimate> {
+        let ci = self.full.as_ref().and_then(|f| f.ci95.as_ref());
+        self.params()
+            .map(|p| parameter_estimates(&p, ci))
+            .unwrap_or_default()
+    }
+
+    /// The note to give with the result: why the full fit started from the steady states.
+    pub fn note(&self) -> Option<&PaperSkipped> {
+        match (&self.paper, self.route) {
+            (Err(why), StepRoute::FullFromSteadyStates) => Some(why),
+            _ => None,
+        }
+    }
+}
+
+/// Identifies a step pair, the high-voltage step first: the paper's method (unless clipped
+/// samples rule it out), then with [`StepMethod::Full`] the full model (fitting the step
+/// heights and instants as uncertain inputs, [`identify_full_with_inputs`]) started from it, or
+/// from the steady states ([`steady_state_start`]) where it does not apply.
+pub fn identify_step_pair(
+    high: &StepRecord<'_>,
+    low: &StepRecord<'_>,
+    method: StepMethod,
+    settings: LmSettings,
+) -> Result<StepPairIdentification, StepPairError> {
+    let paper = if high.has_clipping() || low.has_clipping() {
+        Err(PaperSkipped::Clipped)
+    } else {
+        identify_paper(&high.test, &low.test, settings).map_err(PaperSkipped::Failed)
+    };
+    match method {
+        StepMethod::Paper => match paper {
+            Ok(p) => Ok(StepPairIdentification {
+                paper: Ok(p),
+                full: None,
+                route: StepRoute::Paper,
+            }),
+            Err(e) => Err(StepPairError::Paper(e)),
+        },
+        StepMethod::Full => {
+            let (start, route) = match &paper {
+                Ok(p) => (p.params, StepRoute::FullFromPaper),
+                Err(_) => (
+                    steady_state_start(&high.test, &low.test).map_err(StepPairError::Start)?,
+                    StepRoute::FullFromSteadyStates,
+                ),
+            };
+            let full = identify_full_with_inputs(
+                &[high.test, low.test],
+                &[high.inputs, low.inputs],
+                &start,
+                settings,
+            )
+            .map_err(StepPairError::Full)?;
+            Ok(StepPairIdentification {
+                paper,
+                full: Some(full),
+                route,
+            })
+        }
+    }
+}
+
+/// An analog channel of a record, as the clipping policy names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum RecordChannel {
+    /// The armature voltage: the fits take it as known.
+    Voltage,
+    /// The armature current.
+    Current,
+    /// The tachometer speed (an encoder has no ADC rail).
+    Speed,
+}
+
+/// Largest fraction of the current or the speed that may sit on an ADC rail before the record
+/// is refused.
+pub const MAX_CLIPPED_FRACTION: f64 = 0.25;
+/// Largest fraction of the voltage that may be clipped: the fits take the voltage as known.
+pub const MAX_CLIPPED_VOLTAGE: f64 = 0.01;
+
+impl RecordChannel {
+    /// Largest fraction \[-\] of the channel's samples that may be clipped.
+    pub fn max_clipped_fraction(self) -> f64 {
+        match self {
+            RecordChannel::Voltage => MAX_CLIPPED_VOLTAGE,
+            RecordChannel::Current | RecordChannel::Speed => MAX_CLIPPED_FRACTION,
+        }
+    }
+}
+
+/// What the clipping policy makes of one channel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[non_exhaustive]
+pub enum ClippingVerdict {
+    /// No sample at a rail.
+    Clean,
+    /// Some samples at a rail: they are left out of the fits.
+    LeftOut,
+    /// Too much of the channel at a rail: the record is refused.
+    Refused {
+        /// Why, in words (`the fits need the applied voltage`, …).
+        reason: &'static str,
+    },
+}
+
+/// The clipping policy for `channel` whose samples at an ADC rail are marked in `mask`: clean,
+/// left out of the fits, or refused beyond [`RecordChannel::max_clipped_fraction`].
+pub fn judge_clipping(channel: RecordChannel, mask: &[bool]) -> ClippingVerdict {
+    let clipped = mask.iter().filter(|&&x| x).count();
+    if clipped == 0 {
+        return ClippingVerdict::Clean;
+    }
+    let fraction = clipped as f64 / mask.len().max(1) as f64;
+    if fraction > channel.max_clipped_fraction() {
+        ClippingVerdict::Refused {
+            reason: match channel {
+                RecordChannel::Voltage => "the fits need the applied voltage",
+                RecordChannel::Current | RecordChannel::Speed => "too much of the record is lost",
+            },
+        }
+    } else {
+        ClippingVerdict::LeftOut
+    }
+}
+
+/// The steady value of a settled record is the median of its last `1/STEADY_TAIL_PARTS`.
+pub const STEADY_TAIL_PARTS: usize = 10;
+
+/// The steady value of a settled channel (unit of `samples`): the median of its last tenth
+/// (at least one sample; the upper median of an even count). `None` for an empty channel.
+pub fn steady_value(samples: &[f64]) -> Option<f64> {
+    if samples.is_empty() {
+        return None;
+    }
+    let n = samples.len();
+    let mut tail = samples[n - (n / STEADY_TAIL_PARTS).max(1)..].to_vec();
+    let mid = tail.len() / 2;
+    Some(*tail.select_nth_unstable_by(mid, f64::total_cmp).1)
+}
+
+/// Where a current-driven axis's torque constant came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum TorqueConstantSource {
+    /// Given by the user.
+    Given,
+    /// Estimated from the armature voltage equation (2a).
+    VoltageEquation,
+}
+
+impl TorqueConstantSource {
+    /// The source in words, for reports (`given`, `voltage equation (2a)`).
+    pub fn text(self) -> &'static str {
+        match self {
+            TorqueConstantSource::Given => "given",
+            TorqueConstantSource::VoltageEquation => "voltage equation (2a)",
+        }
+    }
+}
+
+/// Why no torque constant could be chosen.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum TorqueConstantError {
+    /// The given constant is not a positive finite number.
+    NotPositive(f64),
+    /// The voltage equation (2a) refused the record.
+    VoltageEquation(FitError),
+    /// Neither a constant nor a voltage to estimate it from.
+    Missing,
+}
+
+impl fmt::Display for TorqueConstantError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            TorqueConstantError::NotPositive(k) => {
+                write!(f, "torque constant {k}: expected a positive number")
+            }
+            TorqueConstantError::VoltageEquation(e) => write!(f, "{e}"),
+            TorqueConstantError::Missing => {
+                f.write_str("no torque constant and no voltage to estimate it from")
+            }
+        }
+    }
+}
+
+impl std::error::Error for TorqueConstantError {}
+
+/// The torque (or force) constant of a current-driven axis \[N·m/A or N/A, per unit of the
+/// current\]: `given` if any (positive), else from the voltage equation (2a) on `record` (with
+/// the derivatives low-passed at `cutoff_fraction` of the sample rate), if it has a voltage.
+pub fn torque_constant(
+    given: Option<f64>,
+    record: Option<&ExcitedRecord<'_>>,
+    cutoff_fraction: f64,
+) -> Result<(f64, TorqueConstantSource), TorqueConstantError> {
+    match (given, record) {
+        (Some(k), _) if k.is_finite() && k > 0.0 => Ok((k, TorqueConstantSource::Given)),
+        (Some(k), _) => Err(TorqueConstantError::NotPositive(k)),
+        (None, Some(r)) => {
+            let [_, _, k] = electrical_equation(std::slice::from_ref(r), cutoff_fraction)
+                .map_err(TorqueConstantError::VoltageEquation)?;
+            Ok((k, TorqueConstantSource::VoltageEquation))
+        }
+        (None, None) => Err(TorqueConstantError::Missing),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use motor_model::{Input, MotorState, StepResponse};
+
+    const RATE_HZ: f64 = 100.0;
+
+    struct Columns {
+        volts: f64,
+        current: Vec<f64>,
+        speed: Vec<f64>,
+    }
+
+    fn exact(motor: &MotorParams, volts: f64) -> Columns {
+        let n = (50.0 * RATE_HZ) as usize + 1;
+        let mut s = vec![MotorState::default(); n];
+        StepResponse::new(motor, volts).fill(0.0, 1.0 / RATE_HZ, &mut s);
+        Columns {
+            volts,
+            current: s.iter().map(|x| x.current_a).collect(),
+            speed: s.iter().map(|x| x.speed_rad_s).collect(),
+        }
+    }
+
+    fn record<'a>(c: &'a Columns, exclude: Option<&'a [bool]>) -> StepRecord<'a> {
+        StepRecord {
+            test: StepTest {
+                volts: c.volts,
+                t_first: 0.0,
+                dt: 1.0 / RATE_HZ,
+                current: &c.current,
+                speed: Some(&c.speed),
+                position: None,
+                exclude_current: exclude,
+                exclude_speed: None,
+            },
+            inputs: StepInputs::default(),
+        }
+    }
+
+    #[test]
+    fn full_method_starts_from_the_paper_and_recovers_the_motor() {
+        let truth = MotorParams::paper();
+        let (hv, lv) = (exact(&truth, 40.0), exact(&truth, 2.5));
+        let (high, low) = (record(&hv, None), record(&lv, None));
+        let paper = identify_step_pair(&high, &low, StepMethod::Paper, LmSettings::default())
+            .expect("the paper's method applies");
+        assert_eq!(paper.route, StepRoute::Paper);
+        assert!(paper.full.is_none() && paper.note().is_none());
+        assert!(paper.estimates().iter().all(|e| e.ci95.is_none()));
+        let full = identify_step_pair(&high, &low, StepMethod::Full, LmSettings::default())
+            .expect("the full fit runs");
+        assert_eq!(full.route, StepRoute::FullFromPaper);
+        assert_eq!(full.route.method_name(), "full");
+        let estimates = full.estimates();
+        let names: Vec<&str> = estimates.iter().map(|e| e.name).collect();
+        assert_eq!(names, PARAM_NAMES);
+        for (e, t) in estimates.iter().zip(truth.values()) {
+            assert!(((e.value - t) / t).abs() < 1e-6, "{e:?}");
+            assert!(e.ci95.is_some() && !e.poorly_determined(), "{e:?}");
+        }
+    }
+
+    #[test]
+    fn clipping_rules_out_the_paper_method_and_the_full_fit_starts_from_steady_states() {
+        let truth = MotorParams::paper();
+        let (hv, lv) = (exact(&truth, 40.0), exact(&truth, 2.5));
+        let mut mask = vec![false; hv.current.len()];
+        mask[100..110].iter_mut().for_each(|m| *m = true);
+        let (high, low) = (record(&hv, Some(&mask)), record(&lv, None));
+        let err = identify_step_pair(&high, &low, StepMethod::Paper, LmSettings::default())
+            .expect_err("clipped samples rule out the paper's method");
+        assert_eq!(err, StepPairError::Paper(PaperSkipped::Clipped));
+        assert!(err.to_string().starts_with("clipped samples"));
+        let full = identify_step_pair(&high, &low, StepMethod::Full, LmSettings::default())
+            .expect("the full fit runs on the rest");
+        assert_eq!(full.route, StepRoute::FullFromSteadyStates);
+        assert_eq!(full.note(), Some(&PaperSkipped::Clipped));
+        let p = full.params().expect("a result");
+        assert!(
+            ((p.r_ohm - truth.r_ohm) / truth.r_ohm).abs() < 1e-4,
+            "{p:?}"
+        );
+    }
+
+    #[test]
+    fn mismatched_channels_are_an_error_not_a_panic() {
+        let truth = MotorParams::paper();
+        let (hv, mut lv) = (exact(&truth, 40.0), exact(&truth, 2.5));
+        lv.speed.truncate(10);
+        let (high, low) = (record(&hv, None), record(&lv, None));
+        for method in [StepMethod::Paper, StepMethod::Full] {
+            assert!(identify_step_pair(&high, &low, method, LmSettings::default()).is_err());
+        }
+    }
+
+    #[test]
+    fn clipping_policy_by_channel() {
+        let mask = |clipped: usize, of: usize| (0..of).map(|i| i < clipped).collect::<Vec<_>>();
+        assert_eq!(
+            judge_clipping(RecordChannel::Current, &mask(0, 100)),
+            ClippingVerdict::Clean
+        );
+        assert_eq!(
+            judge_clipping(RecordChannel::Current, &mask(25, 100)),
+            ClippingVerdict::LeftOut
+        );
+        assert!(matches!(
+            judge_clipping(RecordChannel::Speed, &mask(26, 100)),
+            ClippingVerdict::Refused { .. }
+        ));
+        assert_eq!(
+            judge_clipping(RecordChannel::Voltage, &mask(1, 100)),
+            ClippingVerdict::LeftOut
+        );
+        assert_eq!(
+            judge_clipping(RecordChannel::Voltage, &mask(2, 100)),
+            ClippingVerdict::Refused {
+                reason: "the fits need the applied voltage"
+            }
+        );
+        assert_eq!(
+            judge_clipping(RecordChannel::Current, &[]),
+            ClippingVerdict::Clean
+        );
+    }
+
+    #[test]
+    fn steady_value_is_the_median_of_the_last_tenth() {
+        let mut v: Vec<f64> = (0..100).map(f64::from).collect();
+        v[95] = 1e9;
+        // Last tenth: 90..99 with one outlier; the upper median of ten samples.
+        assert_eq!(steady_value(&v), Some(96.0));
+        assert_eq!(steady_value(&[7.0]), Some(7.0));
+        assert_eq!(steady_value(&[]), None);
+    }
+
+    #[test]
+    fn poorly_determined_beyond_ten_percent() {
+        let p = MotorParams::paper();
+        let ci: [[f64; 2]; 6] = std::array::from_fn(|k| {
+            let v = p.values()[k];
+            let half = if k == 3 { 0.2 } else { 0.05 };
+            [v * (1.0 - half), v * (1.0 + half)]
+        });
+        let e = parameter_estimates(&p, Some(&ci));
+        let poor: Vec<&str> = e
+            .iter()
+            .filter(|e| e.poorly_determined())
+            .map(|e| e.name)
+            .collect();
+        assert_eq!(poor, ["f"]);
+        assert!((e[3].relative_half_width().unwrap() - 0.2).abs() < 1e-12);
+        assert!(parameter_estimates(&p, None)
+            .iter()
+            .all(|e| !e.poorly_determined()));
+    }
+
+    #[test]
+    fn torque_constant_given_or_from_the_voltage_equation() {
+        assert_eq!(
+            torque_constant(Some(0.2), None, 0.05),
+            Ok((0.2, TorqueConstantSource::Given))
+        );
+        assert_eq!(
+            torque_constant(Some(-1.0), None, 0.05),
+            Err(TorqueConstantError::NotPositive(-1.0))
+        );
+        assert_eq!(
+            torque_constant(None, None, 0.05),
+            Err(TorqueConstantError::Missing)
+        );
+        let truth = MotorParams::paper();
+        let trace = StepResponse::new(&truth, 40.0)
+            .trace(0.0, 50.0, RATE_HZ)
+            .unwrap();
+        let input = Input::step(40.0, 0.0).unwrap();
+        let record = ExcitedRecord {
+            input: &input,
+            dt: 1.0 / RATE_HZ,
+            current: &trace.current,
+            speed: None,
+            position: Some(&trace.position),
+            exclude_current: None,
+            exclude_speed: None,
+        };
+        let (k, source) = torque_constant(None, Some(&record), 0.2).unwrap();
+        assert_eq!(source, TorqueConstantSource::VoltageEquation);
+        assert!(
+            ((k - truth.k_nm_per_a) / truth.k_nm_per_a).abs() < 0.02,
+            "{k}"
+        );
+    }
+}
