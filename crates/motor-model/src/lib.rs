@@ -56,11 +56,12 @@ pub use measure::{
 pub use params::MotorParams;
 pub use real::{Dual, Real};
 pub use sim::effects::{
-    BrushDrop, CoggingTorque, CurrentSensorLag, Effect, Effects, InductanceSaturation,
-    QuadraticDrag, StribeckFriction, ThermalDrift, COPPER_ALPHA_PER_K, EFFECT_NAMES,
+    BrushDrop, CoggingTorque, CurrentSensorLag, Domain, Effect, EffectKind, Effects,
+    InductanceSaturation, ParamSpec, QuadraticDrag, StribeckFriction, ThermalDrift,
+    COPPER_ALPHA_PER_K, EFFECT_NAMES,
 };
 pub use sim::input::Input;
-pub use sim::simulator::{simulate, Simulator, Trace, MAX_SAMPLES};
+pub use sim::simulator::{simulate, Simulator, Trace, MAX_SAMPLES, MAX_STATES};
 pub use steady::{
     breakaway_time, standstill_current, steady_state, ApparentResistance, SteadyState,
 };

@@ -235,3 +235,194 @@ fn effect_specs_parse_and_errors_say_what_to_fix() {
         );
     }
 }
+
+/// Every kind parses from its table's keys, prints back to the same text, and goes to a value
+/// vector and back unchanged; the table, the names and the parser agree.
+#[test]
+fn every_kind_round_trips_through_its_table() {
+    use motor_model::{EffectKind, EFFECT_NAMES};
+    assert_eq!(EFFECT_NAMES.len(), EffectKind::ALL.len() + 1);
+    assert_eq!(EFFECT_NAMES[EffectKind::ALL.len()], "none");
+    for (k, kind) in EffectKind::ALL.into_iter().enumerate() {
+        assert_eq!(EFFECT_NAMES[k], kind.name());
+        assert_eq!(kind.name().parse::<EffectKind>().unwrap(), kind);
+        // A value inside each domain that is not the default.
+        let values: Vec<f64> = kind
+            .params()
+            .iter()
+            .map(|p| match p.domain {
+                motor_model::Domain::WholeNumber => 4.0,
+                motor_model::Domain::UnitInterval => 0.375,
+                motor_model::Domain::Finite => -0.25,
+                _ => 0.0625,
+            })
+            .collect();
+        let body: Vec<String> = kind
+            .params()
+            .iter()
+            .zip(&values)
+            .map(|(p, v)| format!("{}={v}", p.key))
+            .collect();
+        let text = format!("{}:{}", kind.name(), body.join(","));
+        let parsed: Effect = text.parse().unwrap();
+        assert_eq!(parsed.kind(), Some(kind));
+        assert_eq!(parsed.to_string(), text);
+        assert_eq!(parsed.to_values(), values);
+        assert_eq!(Effect::from_values(kind, &values).unwrap(), parsed);
+        // Only the required keys: the others take the table's defaults.
+        let required: Vec<String> = kind
+            .params()
+            .iter()
+            .zip(&values)
+            .filter(|(p, _)| p.default.is_none())
+            .map(|(p, v)| format!("{}={v}", p.key))
+            .collect();
+        let short: Effect = format!("{}:{}", kind.name(), required.join(","))
+            .parse()
+            .unwrap();
+        for ((p, v), (got, given)) in kind
+            .params()
+            .iter()
+            .zip(&values)
+            .zip(short.to_values().iter().zip(&values))
+        {
+            let want = p.default.unwrap_or(*v);
+            assert_eq!(*got, want, "{} {}", kind.name(), p.key);
+            let _ = given;
+        }
+        // The fitted view of a set with this effect alone.
+        let set = Effects::none().with(parsed);
+        let slots = set.fitted_slots();
+        let fitted: Vec<f64> = kind
+            .params()
+            .iter()
+            .zip(&values)
+            .filter(|(p, _)| p.fitted)
+            .map(|(_, v)| *v)
+            .collect();
+        assert_eq!(slots.len(), fitted.len());
+        assert!(slots.iter().all(|(k, p)| *k == kind && p.fitted));
+        assert_eq!(set.fitted_values(), fitted);
+        let doubled: Vec<f64> = fitted.iter().map(|v| 0.5 * v).collect();
+        let moved = set.with_fitted_values(&doubled).unwrap();
+        assert_eq!(moved.fitted_values(), doubled);
+        assert_eq!(moved.list().len(), 1);
+    }
+}
+
+/// A value outside its domain is refused with the effect's and the parameter's names, from
+/// text, from a value vector and from the fitted view alike.
+#[test]
+fn domain_violations_name_the_parameter() {
+    use motor_model::EffectKind;
+    let err = Effect::from_values(EffectKind::CurrentSensorLag, &[-1.0])
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("current_sensor_lag tau"), "{err}");
+    assert!(err.contains("greater than zero"), "{err}");
+    let err = Effect::from_values(EffectKind::CoggingTorque, &[0.01, 2.5, 0.0])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("cogging_torque n") && err.contains("whole number"),
+        "{err}"
+    );
+    let err = Effect::from_values(EffectKind::QuadraticDrag, &[f64::NAN])
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("quadratic_drag c"), "{err}");
+    let err = Effect::from_values(EffectKind::BrushDrop, &[1.0])
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("brush_drop parameter count"), "{err}");
+    let set = Effects::none().with("inductance_saturation:isat=1".parse().unwrap());
+    let err = set.with_fitted_values(&[1.0, 1.5]).unwrap_err().to_string();
+    assert!(
+        err.contains("inductance_saturation ratio") && err.contains("(0, 1]"),
+        "{err}"
+    );
+    // The simulator checks what the text parser cannot: Tst against the motor's Ts, and any
+    // effect built in code.
+    let low = Effects::none().with("stribeck_friction:tst=0.01".parse().unwrap());
+    let err = Simulator::new(MotorParams::paper(), low, Input::step(1.0, 0.0).unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("stribeck_friction tst") && err.contains("Coulomb torque"),
+        "{err}"
+    );
+    let mut built = Effects::none();
+    built.thermal_drift = Some(motor_model::ThermalDrift {
+        thermal_resistance_k_per_w: 2.0,
+        thermal_capacity_j_per_k: -3.0,
+        alpha_per_k: 0.004,
+    });
+    let err = Simulator::new(MotorParams::paper(), built, Input::step(1.0, 0.0).unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("thermal_drift cth"), "{err}");
+}
+
+/// The unconstrained coordinates invert each other and refuse the boundaries they cannot
+/// reach; Stribeck's Tst is carried as its excess over Ts.
+#[test]
+fn unconstrained_transforms_invert() {
+    use motor_model::EffectKind;
+    let motor = MotorParams::paper();
+    for kind in EffectKind::ALL {
+        for p in kind.params().iter().filter(|p| p.fitted) {
+            let v = match p.domain {
+                motor_model::Domain::UnitInterval => 0.3,
+                motor_model::Domain::Finite => -1.2,
+                motor_model::Domain::AboveCoulomb => motor.ts_nm * 1.5,
+                _ => 0.7,
+            };
+            let th = p.to_unconstrained(v, &motor).unwrap();
+            let back = p.from_unconstrained(th, &motor);
+            assert!(
+                (back - v).abs() < 1e-12,
+                "{} {}: {back} vs {v}",
+                kind.name(),
+                p.key
+            );
+            let h = 1e-6;
+            let slope = (p.from_unconstrained(th + h, &motor)
+                - p.from_unconstrained(th - h, &motor))
+                / (2.0 * h);
+            assert!((slope - p.slope(th)).abs() < 1e-6 * slope.abs().max(1.0));
+        }
+    }
+    let tst = EffectKind::StribeckFriction.param("tst").unwrap();
+    assert!(tst.to_unconstrained(motor.ts_nm, &motor).is_err());
+    let c = EffectKind::QuadraticDrag.param("c").unwrap();
+    assert!(c.to_unconstrained(0.0, &motor).is_err());
+}
+
+/// The state holds I, Ω, θ and the states of the effects that are on, nothing more.
+#[test]
+fn state_is_sized_by_the_effects_that_are_on() {
+    let sim = |specs: &[&str]| {
+        let effects = specs
+            .iter()
+            .fold(Effects::none(), |e, s| e.with(s.parse::<Effect>().unwrap()));
+        Simulator::new(
+            MotorParams::paper(),
+            effects,
+            Input::step(1.0, 0.0).unwrap(),
+        )
+        .unwrap()
+    };
+    assert_eq!(sim(&[]).state_len(), 3);
+    assert_eq!(
+        sim(&["quadratic_drag:c=1e-4", "brush_drop:vb=0.5"]).state_len(),
+        3
+    );
+    assert_eq!(sim(&["thermal_drift:rth=2,cth=30"]).state_len(), 4);
+    assert_eq!(sim(&["current_sensor_lag:tau=0.01"]).state_len(), 4);
+    let both = sim(&["thermal_drift:rth=2,cth=30", "current_sensor_lag:tau=0.01"]);
+    assert_eq!(both.state_len(), 5);
+    // The sensor reads its own state (after the thermal one): a lag on the current only.
+    let trace = both.run(0.2, 1000.0).unwrap();
+    let lagged = trace.current[10];
+    assert!(lagged < trace.armature_current[10]);
+}

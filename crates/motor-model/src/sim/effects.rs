@@ -1,15 +1,21 @@
 //! Unmodelled effects of SPEC section 5, each a typed set of parameters with its equation.
 //!
 //! Effects are switched on in an [`Effects`] set handed to the [`crate::Simulator`]; the nominal
-//! model of the paper is the empty set (the effect `none`). Each parses from the command-line
-//! form `name:key=value,...`; keys not given take the documented default.
+//! model of the paper is the empty set (the effect `none`). Each kind of effect has one table of
+//! its parameters ([`EffectKind::params`]: key, symbol, unit, default, domain, whether a fit
+//! estimates it); parsing (`name:key=value,...`, keys not given take the table's default),
+//! printing, the list of names [`EFFECT_NAMES`] and the conversion to and from a vector of
+//! values ([`Effect::to_values`], [`Effect::from_values`]) all read that table. The dynamics
+//! each effect adds to the plant are in the simulator (`Dynamics`, one implementation per
+//! effect).
 
 use std::fmt;
 use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::{finite, non_negative, positive, ModelError};
+use crate::error::ModelError;
+use crate::params::MotorParams;
 
 /// Copper's temperature coefficient of resistance at 20 °C \[1/K\] (IEC 60028 annealed copper).
 pub const COPPER_ALPHA_PER_K: f64 = 0.00393;
@@ -102,17 +108,389 @@ pub struct Effects {
     pub inductance_saturation: Option<InductanceSaturation>,
 }
 
-/// The names of SPEC section 5, in the order the diagnoser reports them.
-pub const EFFECT_NAMES: [&str; 8] = [
-    "stribeck_friction",
-    "cogging_torque",
-    "current_sensor_lag",
-    "thermal_drift",
-    "quadratic_drag",
-    "brush_drop",
-    "inductance_saturation",
-    "none",
+/// The set a parameter's value must lie in, with the transform to an unconstrained real that
+/// an optimiser can move freely ([`ParamSpec::to_unconstrained`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Domain {
+    /// Finite and `> 0`; unconstrained `θ = ln v`.
+    Positive,
+    /// Finite and `≥ 0`; unconstrained `θ = ln v` (a fit moves a size that is not zero: a
+    /// start of exactly 0 is refused by [`ParamSpec::to_unconstrained`]).
+    NonNegative,
+    /// Any finite value; unconstrained `θ = v`.
+    Finite,
+    /// Finite in `(0, 1]`; unconstrained `θ = ln(v/(1 − v))` (logit; a start of exactly 1 is
+    /// refused by [`ParamSpec::to_unconstrained`]).
+    UnitInterval,
+    /// A whole number from 1 to 65535 (a count, never fitted); unconstrained `θ = v`.
+    WholeNumber,
+    /// A torque \[N·m\] at least the motor's Coulomb torque Ts (checked when the simulator is
+    /// built, `> 0` alone when parsed); unconstrained `θ = ln(v − Ts)`, so that a fit moving
+    /// Ts keeps `v > Ts`: the value depends on `ln Ts` too, `∂v/∂(ln Ts) = Ts`.
+    AboveCoulomb,
+}
+
+impl Domain {
+    /// What the domain expects, in words.
+    pub fn expected(self) -> &'static str {
+        match self {
+            Domain::Positive | Domain::AboveCoulomb => "a finite value greater than zero",
+            Domain::NonNegative => "a finite value of zero or more",
+            Domain::Finite => "a finite number",
+            Domain::UnitInterval => "a finite value in (0, 1]",
+            Domain::WholeNumber => "a whole number from 1 to 65535",
+        }
+    }
+
+    /// Whether `value` lies in the domain (for [`Domain::AboveCoulomb`], the part that does
+    /// not need the motor: `> 0`).
+    pub fn contains(self, value: f64) -> bool {
+        value.is_finite()
+            && match self {
+                Domain::Positive | Domain::AboveCoulomb => value > 0.0,
+                Domain::NonNegative => value >= 0.0,
+                Domain::Finite => true,
+                Domain::UnitInterval => value > 0.0 && value <= 1.0,
+                Domain::WholeNumber => {
+                    value >= 1.0 && value.fract() == 0.0 && value <= f64::from(u16::MAX)
+                }
+            }
+    }
+
+    /// `value` if it lies in the domain, else the error naming the setting `name`.
+    pub fn check(self, name: &str, value: f64) -> Result<f64, ModelError> {
+        if self.contains(value) {
+            Ok(value)
+        } else {
+            Err(ModelError::InvalidSetting {
+                name: name.to_string(),
+                value,
+                expected: self.expected(),
+            })
+        }
+    }
+}
+
+/// One parameter of an effect: how it is written, its unit, its default and its domain.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParamSpec {
+    /// Key in the command-line form `name:key=value`, e.g. `tst`.
+    pub key: &'static str,
+    /// Symbol in reports, e.g. `Tst`.
+    pub symbol: &'static str,
+    /// SI unit, e.g. `N·m` (`-` for a pure number).
+    pub unit: &'static str,
+    /// What it is, in words (for messages: "missing `tst=` (static friction torque in N·m)").
+    pub description: &'static str,
+    /// Value when the key is not given; `None` for a required key.
+    pub default: Option<f64>,
+    /// The values it may take.
+    pub domain: Domain,
+    /// Whether a fit estimates it; `false` for counts and material constants (a cogging
+    /// period count, copper's temperature coefficient) and numerical regularisations (the
+    /// brush knee).
+    pub fitted: bool,
+}
+
+impl ParamSpec {
+    /// The unconstrained coordinate of `value` ([`Domain`]); `motor` gives Ts for
+    /// [`Domain::AboveCoulomb`]. Refuses a value outside the domain or on a boundary the
+    /// transform cannot reach (0 for [`Domain::NonNegative`], 1 for [`Domain::UnitInterval`],
+    /// Ts for [`Domain::AboveCoulomb`]).
+    pub fn to_unconstrained(&self, value: f64, motor: &MotorParams) -> Result<f64, ModelError> {
+        self.domain.check(self.key, value)?;
+        let boundary = |expected| ModelError::InvalidSetting {
+            name: self.key.to_string(),
+            value,
+            expected,
+        };
+        match self.domain {
+            Domain::Positive => Ok(value.ln()),
+            Domain::NonNegative if value > 0.0 => Ok(value.ln()),
+            Domain::NonNegative => Err(boundary(
+                "a size greater than zero to start a fit from (it is fitted as ln v)",
+            )),
+            Domain::Finite | Domain::WholeNumber => Ok(value),
+            Domain::UnitInterval if value < 1.0 => Ok((value / (1.0 - value)).ln()),
+            Domain::UnitInterval => Err(boundary(
+                "a value below 1 to start a fit from (it is fitted as ln(v/(1 − v)))",
+            )),
+            Domain::AboveCoulomb if value > motor.ts_nm => Ok((value - motor.ts_nm).ln()),
+            Domain::AboveCoulomb => Err(boundary(
+                "a torque above the motor's Coulomb torque Ts to start a fit from (it is fitted as ln(v − Ts))",
+            )),
+        }
+    }
+
+    /// The value at unconstrained coordinate `theta` (inverse of
+    /// [`ParamSpec::to_unconstrained`]); `motor` gives Ts for [`Domain::AboveCoulomb`].
+    pub fn from_unconstrained(&self, theta: f64, motor: &MotorParams) -> f64 {
+        match self.domain {
+            Domain::Positive | Domain::NonNegative => theta.exp(),
+            Domain::Finite | Domain::WholeNumber => theta,
+            Domain::UnitInterval => 1.0 / (1.0 + (-theta).exp()),
+            Domain::AboveCoulomb => motor.ts_nm + theta.exp(),
+        }
+    }
+
+    /// `dv/dθ` at unconstrained coordinate `theta` (the delta method's factor from an
+    /// interval on θ to one on the value). For [`Domain::AboveCoulomb`] the value also moves
+    /// with `ln Ts`, by `Ts`.
+    pub fn slope(&self, theta: f64) -> f64 {
+        match self.domain {
+            Domain::Positive | Domain::NonNegative | Domain::AboveCoulomb => theta.exp(),
+            Domain::Finite | Domain::WholeNumber => 1.0,
+            Domain::UnitInterval => {
+                let v = 1.0 / (1.0 + (-theta).exp());
+                v * (1.0 - v)
+            }
+        }
+    }
+}
+
+/// The kinds of effect of SPEC section 5 (the nominal model, `none`, is no kind: it is the
+/// empty [`Effects`] set).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum EffectKind {
+    /// [`StribeckFriction`].
+    StribeckFriction,
+    /// [`CoggingTorque`].
+    CoggingTorque,
+    /// [`CurrentSensorLag`].
+    CurrentSensorLag,
+    /// [`ThermalDrift`].
+    ThermalDrift,
+    /// [`QuadraticDrag`].
+    QuadraticDrag,
+    /// [`BrushDrop`].
+    BrushDrop,
+    /// [`InductanceSaturation`].
+    InductanceSaturation,
+}
+
+const STRIBECK_PARAMS: [ParamSpec; 2] = [
+    ParamSpec {
+        key: "tst",
+        symbol: "Tst",
+        unit: "N·m",
+        description: "static friction torque",
+        default: None,
+        domain: Domain::AboveCoulomb,
+        fitted: true,
+    },
+    ParamSpec {
+        key: "ws",
+        symbol: "Ωs",
+        unit: "rad/s",
+        description: "Stribeck speed",
+        default: Some(1.0),
+        domain: Domain::Positive,
+        fitted: true,
+    },
 ];
+
+const COGGING_PARAMS: [ParamSpec; 3] = [
+    ParamSpec {
+        key: "amp",
+        symbol: "A",
+        unit: "N·m",
+        description: "amplitude",
+        default: None,
+        domain: Domain::NonNegative,
+        fitted: true,
+    },
+    ParamSpec {
+        key: "n",
+        symbol: "N",
+        unit: "-",
+        description: "periods per revolution",
+        default: Some(6.0),
+        domain: Domain::WholeNumber,
+        fitted: false,
+    },
+    ParamSpec {
+        key: "phase",
+        symbol: "φ",
+        unit: "rad",
+        description: "phase",
+        default: Some(0.0),
+        domain: Domain::Finite,
+        fitted: true,
+    },
+];
+
+const SENSOR_LAG_PARAMS: [ParamSpec; 1] = [ParamSpec {
+    key: "tau",
+    symbol: "τf",
+    unit: "s",
+    description: "filter time constant",
+    default: None,
+    domain: Domain::Positive,
+    fitted: true,
+}];
+
+const THERMAL_PARAMS: [ParamSpec; 3] = [
+    ParamSpec {
+        key: "rth",
+        symbol: "Rth",
+        unit: "K/W",
+        description: "thermal resistance",
+        default: None,
+        domain: Domain::Positive,
+        fitted: true,
+    },
+    ParamSpec {
+        key: "cth",
+        symbol: "Cth",
+        unit: "J/K",
+        description: "thermal capacity",
+        default: None,
+        domain: Domain::Positive,
+        fitted: true,
+    },
+    ParamSpec {
+        key: "alpha",
+        symbol: "α",
+        unit: "1/K",
+        description: "temperature coefficient of resistance",
+        default: Some(COPPER_ALPHA_PER_K),
+        domain: Domain::NonNegative,
+        fitted: false,
+    },
+];
+
+const DRAG_PARAMS: [ParamSpec; 1] = [ParamSpec {
+    key: "c",
+    symbol: "c",
+    unit: "N·m·s²/rad²",
+    description: "coefficient",
+    default: None,
+    domain: Domain::NonNegative,
+    fitted: true,
+}];
+
+const BRUSH_PARAMS: [ParamSpec; 2] = [
+    ParamSpec {
+        key: "vb",
+        symbol: "Vb",
+        unit: "V",
+        description: "drop",
+        default: None,
+        domain: Domain::NonNegative,
+        fitted: true,
+    },
+    ParamSpec {
+        key: "knee",
+        symbol: "I_knee",
+        unit: "A",
+        description: "knee current",
+        default: Some(0.05),
+        domain: Domain::Positive,
+        fitted: false,
+    },
+];
+
+const SATURATION_PARAMS: [ParamSpec; 2] = [
+    ParamSpec {
+        key: "isat",
+        symbol: "I_sat",
+        unit: "A",
+        description: "saturation current",
+        default: None,
+        domain: Domain::Positive,
+        fitted: true,
+    },
+    ParamSpec {
+        key: "ratio",
+        symbol: "r",
+        unit: "-",
+        description: "ratio L(∞)/L0",
+        default: Some(0.5),
+        domain: Domain::UnitInterval,
+        fitted: true,
+    },
+];
+
+impl EffectKind {
+    /// Every kind, in the order of [`EFFECT_NAMES`].
+    pub const ALL: [EffectKind; 7] = [
+        EffectKind::StribeckFriction,
+        EffectKind::CoggingTorque,
+        EffectKind::CurrentSensorLag,
+        EffectKind::ThermalDrift,
+        EffectKind::QuadraticDrag,
+        EffectKind::BrushDrop,
+        EffectKind::InductanceSaturation,
+    ];
+
+    /// The SPEC section 5 name.
+    pub const fn name(self) -> &'static str {
+        match self {
+            EffectKind::StribeckFriction => "stribeck_friction",
+            EffectKind::CoggingTorque => "cogging_torque",
+            EffectKind::CurrentSensorLag => "current_sensor_lag",
+            EffectKind::ThermalDrift => "thermal_drift",
+            EffectKind::QuadraticDrag => "quadratic_drag",
+            EffectKind::BrushDrop => "brush_drop",
+            EffectKind::InductanceSaturation => "inductance_saturation",
+        }
+    }
+
+    /// The table of its parameters, in the order of [`Effect::to_values`].
+    pub const fn params(self) -> &'static [ParamSpec] {
+        match self {
+            EffectKind::StribeckFriction => &STRIBECK_PARAMS,
+            EffectKind::CoggingTorque => &COGGING_PARAMS,
+            EffectKind::CurrentSensorLag => &SENSOR_LAG_PARAMS,
+            EffectKind::ThermalDrift => &THERMAL_PARAMS,
+            EffectKind::QuadraticDrag => &DRAG_PARAMS,
+            EffectKind::BrushDrop => &BRUSH_PARAMS,
+            EffectKind::InductanceSaturation => &SATURATION_PARAMS,
+        }
+    }
+
+    /// The parameter of key `key`, if it has one.
+    pub fn param(self, key: &str) -> Option<&'static ParamSpec> {
+        self.params().iter().find(|p| p.key == key)
+    }
+}
+
+impl fmt::Display for EffectKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for EffectKind {
+    type Err = ModelError;
+
+    /// A kind by its SPEC section 5 name (`none` is not a kind).
+    fn from_str(name: &str) -> Result<Self, ModelError> {
+        EffectKind::ALL
+            .into_iter()
+            .find(|k| k.name() == name.trim())
+            .ok_or_else(|| ModelError::EffectSpec {
+                spec: name.to_string(),
+                reason: format!(
+                    "unknown effect `{}`; known: {}",
+                    name.trim(),
+                    EFFECT_NAMES.join(", ")
+                ),
+            })
+    }
+}
+
+/// The names of SPEC section 5, in the order the diagnoser reports them: every
+/// [`EffectKind::name`], then `none`.
+pub const EFFECT_NAMES: [&str; 8] = {
+    let mut out = ["none"; 8];
+    let mut i = 0;
+    while i < EffectKind::ALL.len() {
+        out[i] = EffectKind::ALL[i].name();
+        i += 1;
+    }
+    out
+};
 
 /// One effect with its parameters, as parsed from `name:key=value,...`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -137,51 +515,115 @@ pub enum Effect {
 }
 
 impl Effect {
+    /// Its kind; `None` for the nominal model.
+    pub fn kind(&self) -> Option<EffectKind> {
+        Some(match self {
+            Effect::StribeckFriction(_) => EffectKind::StribeckFriction,
+            Effect::CoggingTorque(_) => EffectKind::CoggingTorque,
+            Effect::CurrentSensorLag(_) => EffectKind::CurrentSensorLag,
+            Effect::ThermalDrift(_) => EffectKind::ThermalDrift,
+            Effect::QuadraticDrag(_) => EffectKind::QuadraticDrag,
+            Effect::BrushDrop(_) => EffectKind::BrushDrop,
+            Effect::InductanceSaturation(_) => EffectKind::InductanceSaturation,
+            Effect::None => return None,
+        })
+    }
+
     /// The SPEC section 5 name of this effect.
     pub fn name(&self) -> &'static str {
-        match self {
-            Effect::StribeckFriction(_) => "stribeck_friction",
-            Effect::CoggingTorque(_) => "cogging_torque",
-            Effect::CurrentSensorLag(_) => "current_sensor_lag",
-            Effect::ThermalDrift(_) => "thermal_drift",
-            Effect::QuadraticDrag(_) => "quadratic_drag",
-            Effect::BrushDrop(_) => "brush_drop",
-            Effect::InductanceSaturation(_) => "inductance_saturation",
-            Effect::None => "none",
+        self.kind().map_or("none", EffectKind::name)
+    }
+
+    /// Its parameter values in the order of its table ([`EffectKind::params`]), SI units
+    /// (a count as a whole `f64`); empty for `none`.
+    pub fn to_values(&self) -> Vec<f64> {
+        match *self {
+            Effect::StribeckFriction(e) => vec![e.static_torque_nm, e.stribeck_speed_rad_s],
+            Effect::CoggingTorque(e) => {
+                vec![e.amplitude_nm, f64::from(e.periods_per_rev), e.phase_rad]
+            }
+            Effect::CurrentSensorLag(e) => vec![e.tau_f_s],
+            Effect::ThermalDrift(e) => vec![
+                e.thermal_resistance_k_per_w,
+                e.thermal_capacity_j_per_k,
+                e.alpha_per_k,
+            ],
+            Effect::QuadraticDrag(e) => vec![e.c_nms2_per_rad2],
+            Effect::BrushDrop(e) => vec![e.drop_v, e.knee_current_a],
+            Effect::InductanceSaturation(e) => vec![e.saturation_current_a, e.min_ratio],
+            Effect::None => Vec::new(),
         }
+    }
+
+    /// The effect of `kind` with `values` in the order of its table, each checked against
+    /// its domain (the error names the effect and the parameter, e.g.
+    /// `current_sensor_lag tau = -1: expected a finite value greater than zero`).
+    pub fn from_values(kind: EffectKind, values: &[f64]) -> Result<Effect, ModelError> {
+        let table = kind.params();
+        if values.len() != table.len() {
+            return Err(ModelError::InvalidSetting {
+                name: format!("{} parameter count", kind.name()),
+                value: values.len() as f64,
+                expected: "one value per parameter of the effect's table",
+            });
+        }
+        let v = table
+            .iter()
+            .zip(values)
+            .map(|(spec, &value)| {
+                spec.domain
+                    .check(&format!("{} {}", kind.name(), spec.key), value)
+            })
+            .collect::<Result<Vec<f64>, _>>()?;
+        Ok(match kind {
+            EffectKind::StribeckFriction => Effect::StribeckFriction(StribeckFriction {
+                static_torque_nm: v[0],
+                stribeck_speed_rad_s: v[1],
+            }),
+            EffectKind::CoggingTorque => Effect::CoggingTorque(CoggingTorque {
+                amplitude_nm: v[0],
+                // A whole number from 1 to 65535 (checked above).
+                periods_per_rev: v[1] as u32,
+                phase_rad: v[2],
+            }),
+            EffectKind::CurrentSensorLag => {
+                Effect::CurrentSensorLag(CurrentSensorLag { tau_f_s: v[0] })
+            }
+            EffectKind::ThermalDrift => Effect::ThermalDrift(ThermalDrift {
+                thermal_resistance_k_per_w: v[0],
+                thermal_capacity_j_per_k: v[1],
+                alpha_per_k: v[2],
+            }),
+            EffectKind::QuadraticDrag => Effect::QuadraticDrag(QuadraticDrag {
+                c_nms2_per_rad2: v[0],
+            }),
+            EffectKind::BrushDrop => Effect::BrushDrop(BrushDrop {
+                drop_v: v[0],
+                knee_current_a: v[1],
+            }),
+            EffectKind::InductanceSaturation => {
+                Effect::InductanceSaturation(InductanceSaturation {
+                    saturation_current_a: v[0],
+                    min_ratio: v[1],
+                })
+            }
+        })
     }
 }
 
 impl fmt::Display for Effect {
+    /// `name:key=value,...` in the order of the effect's table (parses back to the same
+    /// effect); `none` for the nominal model.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Effect::StribeckFriction(e) => write!(
-                f,
-                "stribeck_friction:tst={},ws={}",
-                e.static_torque_nm, e.stribeck_speed_rad_s
-            ),
-            Effect::CoggingTorque(e) => write!(
-                f,
-                "cogging_torque:amp={},n={},phase={}",
-                e.amplitude_nm, e.periods_per_rev, e.phase_rad
-            ),
-            Effect::CurrentSensorLag(e) => write!(f, "current_sensor_lag:tau={}", e.tau_f_s),
-            Effect::ThermalDrift(e) => write!(
-                f,
-                "thermal_drift:rth={},cth={},alpha={}",
-                e.thermal_resistance_k_per_w, e.thermal_capacity_j_per_k, e.alpha_per_k
-            ),
-            Effect::QuadraticDrag(e) => write!(f, "quadratic_drag:c={}", e.c_nms2_per_rad2),
-            Effect::BrushDrop(e) => {
-                write!(f, "brush_drop:vb={},knee={}", e.drop_v, e.knee_current_a)
-            }
-            Effect::InductanceSaturation(e) => write!(
-                f,
-                "inductance_saturation:isat={},ratio={}",
-                e.saturation_current_a, e.min_ratio
-            ),
-            Effect::None => write!(f, "none"),
+        let Some(kind) = self.kind() else {
+            return f.write_str("none");
+        };
+        write!(f, "{}", kind.name())?;
+        for (j, (spec, value)) in kind.params().iter().zip(self.to_values()).enumerate() {
+            let sep = if j == 0 { ':' } else { ',' };
+            write!(f, "{sep}{}={value}", spec.key)?;
         }
+        Ok(())
     }
 }
 
@@ -220,28 +662,38 @@ impl<'a> SpecArgs<'a> {
         Ok(SpecArgs { spec, pairs })
     }
 
-    fn take(&mut self, key: &str) -> Option<f64> {
-        let pos = self.pairs.iter().position(|(k, _)| *k == key)?;
-        Some(self.pairs.remove(pos).1)
-    }
-
-    fn required(&mut self, key: &str, meaning: &str) -> Result<f64, ModelError> {
-        self.take(key).ok_or_else(|| ModelError::EffectSpec {
-            spec: self.spec.to_string(),
-            reason: format!("missing `{key}=` ({meaning})"),
-        })
-    }
-
-    fn finish(self, known: &[&str]) -> Result<(), ModelError> {
-        match self.pairs.first() {
-            None => Ok(()),
-            Some((key, _)) => Err(ModelError::EffectSpec {
+    /// The values of `table`'s keys, defaults for those not given; refuses a missing required
+    /// key and any key the table does not have.
+    fn values(mut self, table: &[ParamSpec]) -> Result<Vec<f64>, ModelError> {
+        let mut out = Vec::with_capacity(table.len());
+        for p in table {
+            let given = self
+                .pairs
+                .iter()
+                .position(|(k, _)| *k == p.key)
+                .map(|pos| self.pairs.remove(pos).1);
+            let value = given.or(p.default).ok_or_else(|| ModelError::EffectSpec {
                 spec: self.spec.to_string(),
-                reason: format!(
-                    "unknown key `{key}`; this effect takes {}",
-                    known.join(", ")
-                ),
-            }),
+                reason: format!("missing `{}=` ({} in {})", p.key, p.description, p.unit),
+            })?;
+            out.push(value);
+        }
+        match self.pairs.first() {
+            None => Ok(out),
+            Some((key, _)) => {
+                let known: Vec<&str> = table.iter().map(|p| p.key).collect();
+                Err(ModelError::EffectSpec {
+                    spec: self.spec.to_string(),
+                    reason: if known.is_empty() {
+                        format!("unknown key `{key}`; this effect takes no parameters")
+                    } else {
+                        format!(
+                            "unknown key `{key}`; this effect takes {}",
+                            known.join(", ")
+                        )
+                    },
+                })
+            }
         }
     }
 }
@@ -249,125 +701,23 @@ impl<'a> SpecArgs<'a> {
 impl FromStr for Effect {
     type Err = ModelError;
 
-    /// Parses `name:key=value,...`, e.g. `cogging_torque:amp=0.01,n=6`.
+    /// Parses `name:key=value,...`, e.g. `cogging_torque:amp=0.01,n=6`, by the effect's table.
     fn from_str(spec: &str) -> Result<Self, ModelError> {
         let spec = spec.trim();
         let (name, body) = spec.split_once(':').unwrap_or((spec, ""));
-        let mut args = SpecArgs::parse(spec, body)?;
-        let effect = match name.trim() {
-            "none" => Effect::None,
-            "stribeck_friction" => {
-                let e = StribeckFriction {
-                    static_torque_nm: positive(
-                        "stribeck_friction tst",
-                        args.required("tst", "static friction torque in N·m")?,
-                    )?,
-                    stribeck_speed_rad_s: positive(
-                        "stribeck_friction ws",
-                        args.take("ws").unwrap_or(1.0),
-                    )?,
-                };
-                args.finish(&["tst", "ws"])?;
-                Effect::StribeckFriction(e)
-            }
-            "cogging_torque" => {
-                let amp = non_negative(
-                    "cogging_torque amp",
-                    args.required("amp", "amplitude in N·m")?,
-                )?;
-                let n = positive("cogging_torque n", args.take("n").unwrap_or(6.0))?;
-                if n.fract() != 0.0 || n > f64::from(u16::MAX) {
-                    return Err(ModelError::EffectSpec {
-                        spec: spec.to_string(),
-                        reason: format!("n = {n} must be a whole number of periods per revolution"),
-                    });
-                }
-                let e = CoggingTorque {
-                    amplitude_nm: amp,
-                    periods_per_rev: n as u32,
-                    phase_rad: finite("cogging_torque phase", args.take("phase").unwrap_or(0.0))?,
-                };
-                args.finish(&["amp", "n", "phase"])?;
-                Effect::CoggingTorque(e)
-            }
-            "current_sensor_lag" => {
-                let e = CurrentSensorLag {
-                    tau_f_s: positive(
-                        "current_sensor_lag tau",
-                        args.required("tau", "filter time constant in s")?,
-                    )?,
-                };
-                args.finish(&["tau"])?;
-                Effect::CurrentSensorLag(e)
-            }
-            "thermal_drift" => {
-                let e = ThermalDrift {
-                    thermal_resistance_k_per_w: positive(
-                        "thermal_drift rth",
-                        args.required("rth", "thermal resistance in K/W")?,
-                    )?,
-                    thermal_capacity_j_per_k: positive(
-                        "thermal_drift cth",
-                        args.required("cth", "thermal capacity in J/K")?,
-                    )?,
-                    alpha_per_k: non_negative(
-                        "thermal_drift alpha",
-                        args.take("alpha").unwrap_or(COPPER_ALPHA_PER_K),
-                    )?,
-                };
-                args.finish(&["rth", "cth", "alpha"])?;
-                Effect::ThermalDrift(e)
-            }
-            "quadratic_drag" => {
-                let e = QuadraticDrag {
-                    c_nms2_per_rad2: non_negative(
-                        "quadratic_drag c",
-                        args.required("c", "coefficient in N·m·s²/rad²")?,
-                    )?,
-                };
-                args.finish(&["c"])?;
-                Effect::QuadraticDrag(e)
-            }
-            "brush_drop" => {
-                let e = BrushDrop {
-                    drop_v: non_negative("brush_drop vb", args.required("vb", "drop in V")?)?,
-                    knee_current_a: positive("brush_drop knee", args.take("knee").unwrap_or(0.05))?,
-                };
-                args.finish(&["vb", "knee"])?;
-                Effect::BrushDrop(e)
-            }
-            "inductance_saturation" => {
-                let ratio = positive(
-                    "inductance_saturation ratio",
-                    args.take("ratio").unwrap_or(0.5),
-                )?;
-                if ratio > 1.0 {
-                    return Err(ModelError::EffectSpec {
-                        spec: spec.to_string(),
-                        reason: format!("ratio = {ratio} must lie in (0, 1]"),
-                    });
-                }
-                let e = InductanceSaturation {
-                    saturation_current_a: positive(
-                        "inductance_saturation isat",
-                        args.required("isat", "saturation current in A")?,
-                    )?,
-                    min_ratio: ratio,
-                };
-                args.finish(&["isat", "ratio"])?;
-                Effect::InductanceSaturation(e)
-            }
-            other => {
-                return Err(ModelError::EffectSpec {
-                    spec: spec.to_string(),
-                    reason: format!(
-                        "unknown effect `{other}`; known: {}",
-                        EFFECT_NAMES.join(", ")
-                    ),
-                })
-            }
-        };
-        Ok(effect)
+        let args = SpecArgs::parse(spec, body)?;
+        if name.trim() == "none" {
+            args.values(&[])?;
+            return Ok(Effect::None);
+        }
+        let kind: EffectKind = name.parse().map_err(|e| match e {
+            ModelError::EffectSpec { reason, .. } => ModelError::EffectSpec {
+                spec: spec.to_string(),
+                reason,
+            },
+            other => other,
+        })?;
+        Effect::from_values(kind, &args.values(kind.params())?)
     }
 }
 
@@ -392,21 +742,120 @@ impl Effects {
         self
     }
 
+    /// Switches the effect of `kind` off.
+    pub fn without(mut self, kind: EffectKind) -> Self {
+        match kind {
+            EffectKind::StribeckFriction => self.stribeck_friction = None,
+            EffectKind::CoggingTorque => self.cogging_torque = None,
+            EffectKind::CurrentSensorLag => self.current_sensor_lag = None,
+            EffectKind::ThermalDrift => self.thermal_drift = None,
+            EffectKind::QuadraticDrag => self.quadratic_drag = None,
+            EffectKind::BrushDrop => self.brush_drop = None,
+            EffectKind::InductanceSaturation => self.inductance_saturation = None,
+        }
+        self
+    }
+
+    /// The effect of `kind`, if it is on.
+    pub fn get(&self, kind: EffectKind) -> Option<Effect> {
+        match kind {
+            EffectKind::StribeckFriction => self.stribeck_friction.map(Effect::StribeckFriction),
+            EffectKind::CoggingTorque => self.cogging_torque.map(Effect::CoggingTorque),
+            EffectKind::CurrentSensorLag => self.current_sensor_lag.map(Effect::CurrentSensorLag),
+            EffectKind::ThermalDrift => self.thermal_drift.map(Effect::ThermalDrift),
+            EffectKind::QuadraticDrag => self.quadratic_drag.map(Effect::QuadraticDrag),
+            EffectKind::BrushDrop => self.brush_drop.map(Effect::BrushDrop),
+            EffectKind::InductanceSaturation => {
+                self.inductance_saturation.map(Effect::InductanceSaturation)
+            }
+        }
+    }
+
     /// The effects switched on, in the order of [`EFFECT_NAMES`].
     pub fn list(&self) -> Vec<Effect> {
-        let mut out = Vec::new();
-        out.extend(self.stribeck_friction.map(Effect::StribeckFriction));
-        out.extend(self.cogging_torque.map(Effect::CoggingTorque));
-        out.extend(self.current_sensor_lag.map(Effect::CurrentSensorLag));
-        out.extend(self.thermal_drift.map(Effect::ThermalDrift));
-        out.extend(self.quadratic_drag.map(Effect::QuadraticDrag));
-        out.extend(self.brush_drop.map(Effect::BrushDrop));
-        out.extend(self.inductance_saturation.map(Effect::InductanceSaturation));
-        out
+        EffectKind::ALL
+            .into_iter()
+            .filter_map(|k| self.get(k))
+            .collect()
     }
 
     /// Whether no effect is on: the paper's model.
     pub fn is_nominal(&self) -> bool {
         self.list().is_empty()
+    }
+
+    /// The parameters a fit estimates ([`ParamSpec::fitted`]) of the effects that are on, in
+    /// the order of [`EFFECT_NAMES`] and then of each effect's table: the order of
+    /// [`Effects::fitted_values`] and [`Effects::with_fitted_values`].
+    pub fn fitted_slots(&self) -> Vec<(EffectKind, &'static ParamSpec)> {
+        self.list()
+            .iter()
+            .filter_map(Effect::kind)
+            .flat_map(|k| k.params().iter().filter(|p| p.fitted).map(move |p| (k, p)))
+            .collect()
+    }
+
+    /// The values of [`Effects::fitted_slots`], SI units.
+    pub fn fitted_values(&self) -> Vec<f64> {
+        self.list()
+            .iter()
+            .flat_map(|e| {
+                let table = e.kind().map_or(&[][..], EffectKind::params);
+                e.to_values()
+                    .into_iter()
+                    .zip(table)
+                    .filter(|(_, p)| p.fitted)
+                    .map(|(v, _)| v)
+            })
+            .collect()
+    }
+
+    /// The same effects with their fitted parameters set to `values` (in the order of
+    /// [`Effects::fitted_slots`]; the others kept), each checked against its domain.
+    pub fn with_fitted_values(&self, values: &[f64]) -> Result<Effects, ModelError> {
+        let slots = self.fitted_slots().len();
+        if values.len() != slots {
+            return Err(ModelError::InvalidSetting {
+                name: "fitted effect parameter count".into(),
+                value: values.len() as f64,
+                expected: "one value per fitted parameter of the effects that are on",
+            });
+        }
+        let mut next = values.iter();
+        let mut out = *self;
+        for effect in self.list() {
+            let Some(kind) = effect.kind() else { continue };
+            let mut v = effect.to_values();
+            for (slot, spec) in v.iter_mut().zip(kind.params()) {
+                if spec.fitted {
+                    if let Some(&x) = next.next() {
+                        *slot = x;
+                    }
+                }
+            }
+            out = out.with(Effect::from_values(kind, &v)?);
+        }
+        Ok(out)
+    }
+
+    /// Checks every value of every effect that is on against its domain, and those that
+    /// depend on the motor (Stribeck's Tst ≥ Ts) against `motor`.
+    pub fn validate(&self, motor: &MotorParams) -> Result<(), ModelError> {
+        for effect in self.list() {
+            if let Some(kind) = effect.kind() {
+                for (spec, value) in kind.params().iter().zip(effect.to_values()) {
+                    let name = format!("{} {}", kind.name(), spec.key);
+                    spec.domain.check(&name, value)?;
+                    if spec.domain == Domain::AboveCoulomb && value < motor.ts_nm {
+                        return Err(ModelError::InvalidSetting {
+                            name,
+                            value,
+                            expected: "a static torque at least the motor's Coulomb torque Ts",
+                        });
+                    }
+                }
+            }
+        }
+        Ok(())
     }
 }

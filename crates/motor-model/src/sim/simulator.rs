@@ -1,24 +1,30 @@
 //! The stick-slip simulator of Appendix D, with pluggable effects.
 //!
-//! The state is `x = [I, Ω, θ, ΔT, I_f]`: armature current \[A\], speed \[rad/s\], angle \[rad\],
-//! winding temperature rise \[K\] (thermal drift) and the current seen by the sensor \[A\]
-//! (sensor lag). Two modes:
+//! The state is `x = [I, Ω, θ, x_e…]`: armature current \[A\], speed \[rad/s\], angle \[rad\],
+//! then the states each effect that is on has of its own (the winding temperature rise ΔT \[K\]
+//! of thermal drift, the current I_f \[A\] seen by a lagging sensor), laid out when the
+//! simulator is built: the nominal model integrates three states. Two modes:
 //!
-//! - **stuck**: `Ω ≡ 0` exactly, `L(I) dI/dt = E − V_brush(I) − R(ΔT) I`; the rotor stays at rest
-//!   while the torque it feels, `|k I − T_cog(θ)|`, does not exceed the static friction
-//!   (`Ts`, or `Tst` with Stribeck friction);
+//! - **stuck**: `Ω ≡ 0` exactly, `L(I) dI/dt = E − V(I) − R(x) I`; the rotor stays at rest
+//!   while the torque it feels, `|k I − T_load(0, θ)|`, does not exceed the static friction
+//!   (`T_c(0)`: `Ts`, or `Tst` with Stribeck friction);
 //! - **moving** in direction `d = ±1`: Eq. (2) with the effects,
-//!   `L(I) dI/dt = E − V_brush(I) − R(ΔT) I − k Ω`,
-//!   `J dΩ/dt = k I − f Ω − d T_c(Ω) − T_cog(θ) − c Ω|Ω|`.
+//!   `L(I) dI/dt = E − V(I) − R(x) I − k Ω`,
+//!   `J dΩ/dt = k I − f Ω − d T_c(Ω) − T_load(Ω, θ)`.
 //!
-//! Integration is classical RK4 with a step of at most 1/40 of the fastest time constant. The
+//! Each effect's part (`L(I)`, `V(I)`, `R(x)`, `T_load`, `T_c`, its own states) is its own
+//! [`Dynamics`](super::dynamics) implementation.
+//!
+//! Integration is classical RK4 with a step of at most 1/40 of the fastest time constant (and,
+//! with cogging, of a cogging period at the current speed — or at a speed bound given up front,
+//! [`Simulator::with_speed_bound`], so that the step does not depend on the state). The
 //! switching instants (breakaway, and each zero crossing of Ω, where the rotor sticks again or
 //! reverses) are located by bisection to 2⁻⁴⁸ of a step, so the stuck intervals are exact to
 //! far below the sample period.
 
 use serde::Serialize;
 
-use super::effects::Effects;
+use super::effects::{Effect, Effects};
 use super::input::Input;
 use crate::derived::signed_damped_pulsation_sq;
 use crate::error::{positive, ModelError};
@@ -26,8 +32,6 @@ use crate::params::MotorParams;
 
 /// RK4 steps per fastest time constant of the plant (global error ≈ 1e-8 of the response).
 const STEPS_PER_TIME_CONSTANT: f64 = 40.0;
-/// RK4 steps per cogging period at the current speed.
-const STEPS_PER_COGGING_PERIOD: f64 = 40.0;
 /// Bisection iterations locating a mode switch inside one step (2⁻⁴⁸ of the step).
 const EVENT_BISECTIONS: u32 = 48;
 /// Mode switches allowed inside one integration step before it is accepted as is (guards
@@ -35,13 +39,17 @@ const EVENT_BISECTIONS: u32 = 48;
 const MAX_EVENTS_PER_STEP: u32 = 8;
 /// Longest record the simulator will produce, in samples (about 80 MB of output).
 pub const MAX_SAMPLES: usize = 10_000_000;
+/// Capacity of the state vector: `[I, Ω, θ]` and the effects' own states.
+pub const MAX_STATES: usize = 8;
 
 const I_IDX: usize = 0;
 const W_IDX: usize = 1;
 const TH_IDX: usize = 2;
-const DT_IDX: usize = 3;
-const IF_IDX: usize = 4;
-type State = [f64; 5];
+/// States of the nominal model.
+const PLANT_STATES: usize = 3;
+/// The state, `N` = [`Simulator::state_len`] (the integrator is compiled for each size, so
+/// that the nominal model integrates three numbers).
+type State<const N: usize> = [f64; N];
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Mode {
@@ -69,35 +77,89 @@ pub struct Trace {
     pub stuck: Vec<bool>,
 }
 
+/// An effect that is on, with the place of its own states in the state vector.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Active {
+    effect: Effect,
+    /// Index of its first own state.
+    offset: usize,
+    /// Number of its own states.
+    states: usize,
+}
+
+impl Active {
+    fn own<'a, const N: usize>(&self, x: &'a State<N>) -> &'a [f64] {
+        &x[self.offset..self.offset + self.states]
+    }
+}
+
 /// The stick-slip simulator: a motor, its effects and an input waveform.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Simulator {
     params: MotorParams,
     effects: Effects,
     input: Input,
+    /// The effects that are on, in the order of `EFFECT_NAMES`, with their state layout.
+    active: Vec<Active>,
+    /// Length of the state vector in use.
+    n_states: usize,
+    /// The state the current sensor reads, if not the armature current.
+    sensor: Option<usize>,
+    /// Dry friction holding the rotor at rest \[N·m\].
+    static_friction_nm: f64,
     max_step_s: f64,
+    /// Whether the step may shorten with the state (cogging at the current speed): not once
+    /// a fit has fixed the step or a speed bound is given.
+    state_dependent_step: bool,
 }
 
 impl Simulator {
-    /// A simulator of `params` with `effects`, driven by `input`.
+    /// A simulator of `params` with `effects`, driven by `input`. Refuses a motor or an effect
+    /// value outside its domain ([`Effects::validate`]: every effect parameter, and Stribeck's
+    /// Tst at least the motor's Ts).
     pub fn new(params: MotorParams, effects: Effects, input: Input) -> Result<Self, ModelError> {
         params.validate()?;
-        if let Some(s) = effects.stribeck_friction {
-            if s.static_torque_nm < params.ts_nm {
+        effects.validate(&params)?;
+        let mut active = Vec::new();
+        let mut offset = PLANT_STATES;
+        let mut sensor = None;
+        for effect in effects.list() {
+            let states = effect.dynamics().states();
+            if offset + states > MAX_STATES {
                 return Err(ModelError::InvalidSetting {
-                    name: "stribeck_friction tst".into(),
-                    value: s.static_torque_nm,
-                    expected: "a static torque at least the motor's Coulomb torque Ts",
+                    name: "states of the effects that are on".into(),
+                    value: (offset + states) as f64,
+                    expected: "at most MAX_STATES states together with I, Ω and θ",
                 });
             }
+            if let Some(j) = effect.dynamics().sensor_state() {
+                sensor = Some(offset + j);
+            }
+            active.push(Active {
+                effect,
+                offset,
+                states,
+            });
+            offset += states;
         }
-        let max_step_s = fastest_time_constant(&params, &effects) / STEPS_PER_TIME_CONSTANT;
-        Ok(Simulator {
+        let static_friction_nm = active
+            .iter()
+            .rev()
+            .find_map(|a| a.effect.dynamics().dry_friction(params.ts_nm, 0.0))
+            .unwrap_or(params.ts_nm);
+        let mut sim = Simulator {
             params,
             effects,
             input,
-            max_step_s,
-        })
+            active,
+            n_states: offset,
+            sensor,
+            static_friction_nm,
+            max_step_s: f64::INFINITY,
+            state_dependent_step: true,
+        };
+        sim.max_step_s = sim.fastest_time_constant() / STEPS_PER_TIME_CONSTANT;
+        Ok(sim)
     }
 
     /// The longest RK4 step \[s\] the integrator takes: 1/40 of the fastest time constant.
@@ -105,19 +167,56 @@ impl Simulator {
         self.max_step_s
     }
 
+    /// The effects simulated.
+    pub fn effects(&self) -> &Effects {
+        &self.effects
+    }
+
+    /// Number of states integrated: 3 (`I`, `Ω`, `θ`) and those of the effects that are on.
+    pub fn state_len(&self) -> usize {
+        self.n_states
+    }
+
     /// The same simulator with its longest RK4 step set to `max_step_s` \[s\] (at most the
     /// default of [`Simulator::max_step_s`]). A fit that differentiates the simulation with
     /// respect to the parameters fixes the step this way, so that the step count does not jump
-    /// between neighbouring parameter values.
+    /// between neighbouring parameter values: from then on the step no longer shortens with
+    /// the state (cogging at the current speed; give [`Simulator::with_speed_bound`] for that).
     pub fn with_max_step(mut self, max_step_s: f64) -> Result<Self, ModelError> {
         let h = positive("max step", max_step_s)?;
         self.max_step_s = self.max_step_s.min(h);
+        self.state_dependent_step = false;
+        Ok(self)
+    }
+
+    /// The same simulator with the steps an effect needs at speed (1/40 of a cogging period)
+    /// taken at `|Ω| ≤ speed_rad_s` \[rad/s\] for the whole run rather than at the current
+    /// speed: the step count on an interval then does not depend on the state, and the
+    /// simulation is smooth in the parameters.
+    pub fn with_speed_bound(mut self, speed_rad_s: f64) -> Result<Self, ModelError> {
+        let w = positive("speed bound", speed_rad_s)?;
+        for a in &self.active {
+            self.max_step_s = self.max_step_s.min(a.effect.dynamics().step_limit(w));
+        }
+        self.state_dependent_step = false;
         Ok(self)
     }
 
     /// Simulates `duration_s` \[s\] from rest, sampled at `rate_hz` \[Hz\] (`t = 0, 1/rate, …`).
     pub fn run(&self, duration_s: f64, rate_hz: f64) -> Result<Trace, ModelError> {
         let (n, dt) = sample_grid(duration_s, rate_hz)?;
+        Ok(match self.n_states {
+            3 => self.run_sized::<3>(n, dt),
+            4 => self.run_sized::<4>(n, dt),
+            5 => self.run_sized::<5>(n, dt),
+            6 => self.run_sized::<6>(n, dt),
+            7 => self.run_sized::<7>(n, dt),
+            _ => self.run_sized::<MAX_STATES>(n, dt),
+        })
+    }
+
+    /// [`Simulator::run`] on `n` samples every `dt` \[s\] with a state of `N` numbers.
+    fn run_sized<const N: usize>(&self, n: usize, dt: f64) -> Trace {
         let mut trace = Trace {
             t: Vec::with_capacity(n),
             voltage: Vec::with_capacity(n),
@@ -127,9 +226,10 @@ impl Simulator {
             position: Vec::with_capacity(n),
             stuck: Vec::with_capacity(n),
         };
-        let mut x: State = [0.0; 5];
+        let mut x: State<N> = [0.0; N];
         let mut mode = Mode::Stuck;
         let mut t = 0.0;
+        let sensor = self.sensor.filter(|&s| s < N).unwrap_or(I_IDX);
         for i in 0..n {
             let t_i = i as f64 * dt;
             // Integrate to t_i, splitting at every jump of E(t) on the way.
@@ -144,29 +244,22 @@ impl Simulator {
             trace.t.push(t_i);
             trace.voltage.push(self.input.volts_at(t_i));
             trace.armature_current.push(x[I_IDX]);
-            trace
-                .current
-                .push(if self.effects.current_sensor_lag.is_some() {
-                    x[IF_IDX]
-                } else {
-                    x[I_IDX]
-                });
+            trace.current.push(x[sensor]);
             trace.speed.push(x[W_IDX]);
             trace.position.push(x[TH_IDX]);
             trace.stuck.push(mode == Mode::Stuck);
         }
-        Ok(trace)
+        trace
     }
 
     /// Advances `x` from `t_from` to `t_to` in RK4 steps no longer than the plant allows.
-    fn integrate(&self, x: &mut State, mode: &mut Mode, t_from: f64, t_to: f64) {
+    fn integrate<const N: usize>(&self, x: &mut State<N>, mode: &mut Mode, t_from: f64, t_to: f64) {
         let mut t = t_from;
         while t < t_to {
             let mut h = self.max_step_s;
-            if let Some(c) = self.effects.cogging_torque {
-                let w = x[W_IDX].abs() * f64::from(c.periods_per_rev);
-                if w > 0.0 {
-                    h = h.min(std::f64::consts::TAU / w / STEPS_PER_COGGING_PERIOD);
+            if self.state_dependent_step {
+                for a in &self.active {
+                    h = h.min(a.effect.dynamics().step_limit(x[W_IDX]));
                 }
             }
             let remaining = t_to - t;
@@ -177,9 +270,8 @@ impl Simulator {
             t = if steps <= 1.0 { t_to } else { t + h };
         }
     }
-
     /// One RK4 step of length `h` from `t`, switching mode at breakaway and zero crossings.
-    fn step_with_events(&self, x: &mut State, mode: &mut Mode, t: f64, h: f64) {
+    fn step_with_events<const N: usize>(&self, x: &mut State<N>, mode: &mut Mode, t: f64, h: f64) {
         let mut t = t;
         let mut left = h;
         for _ in 0..MAX_EVENTS_PER_STEP {
@@ -220,40 +312,32 @@ impl Simulator {
         *x = self.rk4(x, *mode, t, left);
     }
 
-    /// Torque acting on the rotor at rest apart from friction \[N·m\]: `k I − T_cog(θ)`.
-    fn torque_at_rest(&self, x: &State) -> f64 {
-        self.params.k_nm_per_a * x[I_IDX] - self.cogging(x[TH_IDX])
+    /// Torque acting on the rotor at rest apart from friction \[N·m\]: `k I − T_load(0, θ)`.
+    fn torque_at_rest<const N: usize>(&self, x: &State<N>) -> f64 {
+        let load: f64 = self
+            .active
+            .iter()
+            .map(|a| a.effect.dynamics().load_torque(0.0, x[TH_IDX]))
+            .sum();
+        self.params.k_nm_per_a * x[I_IDX] - load
     }
 
-    /// Friction torque that holds the rotor at rest \[N·m\]: `Tst` or `Ts`.
-    fn static_friction(&self) -> f64 {
-        self.effects
-            .stribeck_friction
-            .map_or(self.params.ts_nm, |s| s.static_torque_nm)
-    }
-
-    fn breaks_away(&self, x: &State) -> bool {
-        self.torque_at_rest(x).abs() > self.static_friction()
+    fn breaks_away<const N: usize>(&self, x: &State<N>) -> bool {
+        self.torque_at_rest(x).abs() > self.static_friction_nm
     }
 
     /// The mode of a rotor at rest: stuck while friction can hold it, else moving towards the
     /// torque.
-    fn mode_at_rest(&self, x: &State) -> Mode {
+    fn mode_at_rest<const N: usize>(&self, x: &State<N>) -> Mode {
         let torque = self.torque_at_rest(x);
-        if torque.abs() > self.static_friction() {
+        if torque.abs() > self.static_friction_nm {
             Mode::Moving(torque.signum())
         } else {
             Mode::Stuck
         }
     }
 
-    fn cogging(&self, theta: f64) -> f64 {
-        self.effects.cogging_torque.map_or(0.0, |c| {
-            c.amplitude_nm * (f64::from(c.periods_per_rev) * theta + c.phase_rad).sin()
-        })
-    }
-
-    fn rk4(&self, x: &State, mode: Mode, t: f64, h: f64) -> State {
+    fn rk4<const N: usize>(&self, x: &State<N>, mode: Mode, t: f64, h: f64) -> State<N> {
         let k1 = self.derivative(x, mode, t);
         let k2 = self.derivative(&axpy(x, 0.5 * h, &k1), mode, t + 0.5 * h);
         let k3 = self.derivative(&axpy(x, 0.5 * h, &k2), mode, t + 0.5 * h);
@@ -269,47 +353,63 @@ impl Simulator {
     }
 
     /// `dx/dt` of the state in the given mode (module docs).
-    fn derivative(&self, x: &State, mode: Mode, t: f64) -> State {
+    fn derivative<const N: usize>(&self, x: &State<N>, mode: Mode, t: f64) -> State<N> {
         let p = &self.params;
-        let e = &self.effects;
         let i = x[I_IDX];
         let w = x[W_IDX];
-        let r = e
-            .thermal_drift
-            .map_or(p.r_ohm, |th| p.r_ohm * (1.0 + th.alpha_per_k * x[DT_IDX]));
-        let l = e.inductance_saturation.map_or(p.l_henry, |s| {
-            let u = i / s.saturation_current_a;
-            p.l_henry * (s.min_ratio + (1.0 - s.min_ratio) / (1.0 + u * u))
-        });
-        let v_brush = e
-            .brush_drop
-            .map_or(0.0, |b| b.drop_v * (i / b.knee_current_a).clamp(-1.0, 1.0));
-        let (dw, dth, back_emf) = match mode {
-            Mode::Stuck => (0.0, 0.0, 0.0),
-            Mode::Moving(d) => {
-                let coulomb = e.stribeck_friction.map_or(p.ts_nm, |s| {
-                    let u = w / s.stribeck_speed_rad_s;
-                    p.ts_nm + (s.static_torque_nm - p.ts_nm) * (-u * u).exp()
-                });
-                let drag = e
-                    .quadratic_drag
-                    .map_or(0.0, |q| q.c_nms2_per_rad2 * w * w.abs());
-                let torque = p.k_nm_per_a * i
-                    - p.f_nms_per_rad * w
-                    - d * coulomb
-                    - self.cogging(x[TH_IDX])
-                    - drag;
-                (torque / p.j_kgm2, w, p.k_nm_per_a * w)
+        let (mut r, mut l, mut v_drop) = (p.r_ohm, p.l_henry, 0.0);
+        for a in &self.active {
+            let d = a.effect.dynamics();
+            r *= d.resistance_factor(a.own(x));
+            l *= d.inductance_factor(i);
+            v_drop += d.voltage_drop(i);
+        }
+        let mut dx: State<N> = [0.0; N];
+        let back_emf = match mode {
+            Mode::Stuck => 0.0,
+            Mode::Moving(dir) => {
+                let mut coulomb = p.ts_nm;
+                let mut load = 0.0;
+                for a in &self.active {
+                    let d = a.effect.dynamics();
+                    load += d.load_torque(w, x[TH_IDX]);
+                    if let Some(c) = d.dry_friction(p.ts_nm, w) {
+                        coulomb = c;
+                    }
+                }
+                let torque = p.k_nm_per_a * i - p.f_nms_per_rad * w - dir * coulomb - load;
+                dx[W_IDX] = torque / p.j_kgm2;
+                dx[TH_IDX] = w;
+                p.k_nm_per_a * w
             }
         };
-        let di = (self.input.volts_at(t) - v_brush - r * i - back_emf) / l;
-        let d_temp = e.thermal_drift.map_or(0.0, |th| {
-            (i * i * r - x[DT_IDX] / th.thermal_resistance_k_per_w) / th.thermal_capacity_j_per_k
-        });
-        let d_if = e
-            .current_sensor_lag
-            .map_or(0.0, |lag| (i - x[IF_IDX]) / lag.tau_f_s);
-        [di, dw, dth, d_temp, d_if]
+        dx[I_IDX] = (self.input.volts_at(t) - v_drop - r * i - back_emf) / l;
+        for a in &self.active {
+            let (own, d_own) = (a.own(x), &mut dx[a.offset..a.offset + a.states]);
+            a.effect.dynamics().derivative(i, r, own, d_own);
+        }
+        dx
+    }
+
+    /// The fastest time constant \[s\] among the plant's modes and the effects' own dynamics.
+    fn fastest_time_constant(&self) -> f64 {
+        let p = &self.params;
+        let sigma = 0.5 * (p.r_ohm / p.l_henry + p.f_nms_per_rad / p.j_kgm2);
+        let q = signed_damped_pulsation_sq(p);
+        let omega_n = (p.rf_plus_k2() / (p.l_henry * p.j_kgm2)).sqrt();
+        // Fastest pole magnitude: σ + ωa when overdamped, ωn otherwise.
+        let mut fastest_rate = if q > 0.0 { sigma + q.sqrt() } else { omega_n };
+        // Electrical pole while stuck, with the smallest inductance and the effects' extra
+        // resistance (a brush film).
+        let (mut l_min, mut r_extra) = (p.l_henry, 0.0);
+        for a in &self.active {
+            let d = a.effect.dynamics();
+            l_min *= d.min_inductance_factor();
+            r_extra += d.incremental_resistance();
+            fastest_rate = fastest_rate.max(d.own_rate(p));
+        }
+        fastest_rate = fastest_rate.max((p.r_ohm + r_extra) / l_min);
+        1.0 / fastest_rate
     }
 }
 
@@ -348,34 +448,10 @@ pub(crate) fn sample_grid(duration_s: f64, rate_hz: f64) -> Result<(usize, f64),
     Ok((n_f as usize, 1.0 / rate_hz))
 }
 
-fn axpy(x: &State, a: f64, y: &State) -> State {
+fn axpy<const N: usize>(x: &State<N>, a: f64, y: &State<N>) -> State<N> {
     let mut out = *x;
     for (o, yi) in out.iter_mut().zip(y) {
         *o += a * yi;
     }
     out
-}
-
-/// The fastest time constant \[s\] among the plant's modes and the effects' own dynamics.
-fn fastest_time_constant(p: &MotorParams, e: &Effects) -> f64 {
-    let sigma = 0.5 * (p.r_ohm / p.l_henry + p.f_nms_per_rad / p.j_kgm2);
-    let q = signed_damped_pulsation_sq(p);
-    let omega_n = (p.rf_plus_k2() / (p.l_henry * p.j_kgm2)).sqrt();
-    // Fastest pole magnitude: σ + ωa when overdamped, ωn otherwise.
-    let mut fastest_rate = if q > 0.0 { sigma + q.sqrt() } else { omega_n };
-    // Electrical pole while stuck, with the smallest inductance and the brush film resistance.
-    let l_min = e
-        .inductance_saturation
-        .map_or(p.l_henry, |s| p.l_henry * s.min_ratio);
-    let r_brush = e.brush_drop.map_or(0.0, |b| b.drop_v / b.knee_current_a);
-    fastest_rate = fastest_rate.max((p.r_ohm + r_brush) / l_min);
-    if let Some(lag) = e.current_sensor_lag {
-        fastest_rate = fastest_rate.max(1.0 / lag.tau_f_s);
-    }
-    if let Some(c) = e.cogging_torque {
-        // Small-oscillation pulsation of the rotor in a cogging well.
-        fastest_rate =
-            fastest_rate.max((c.amplitude_nm * f64::from(c.periods_per_rev) / p.j_kgm2).sqrt());
-    }
-    1.0 / fastest_rate
 }

@@ -1,0 +1,187 @@
+//! What each effect of SPEC section 5 adds to the plant's equations (Appendix D with effects):
+//! one implementation of [`Dynamics`] per effect, next to nothing else.
+//!
+//! The simulator's equations (see `simulator.rs`) combine them as
+//!
+//! - `L0 Πₑ l_e(I) dI/dt = E − Σₑ V_e(I) − R0 Πₑ r_e(x_e) I − k Ω`,
+//! - `J dΩ/dt = k I − f Ω − d T_c(Ω) − Σₑ T_e(Ω, θ)` while moving in direction `d`, `T_c`
+//!   the dry friction (the motor's Ts unless an effect sets its level),
+//! - `dx_e/dt` for the states `x_e` an effect has of its own,
+//!
+//! and the current channel reads the sensor's own state when an effect gives it one.
+
+use super::effects::{
+    BrushDrop, CoggingTorque, CurrentSensorLag, Effect, InductanceSaturation, QuadraticDrag,
+    StribeckFriction, ThermalDrift,
+};
+use crate::params::MotorParams;
+
+/// RK4 steps per cogging period at the speed bound (or the current speed).
+const STEPS_PER_COGGING_PERIOD: f64 = 40.0;
+
+/// An effect's part in the plant's equations (module docs). Every method has the neutral
+/// default (no change to the nominal model).
+pub(crate) trait Dynamics {
+    /// Number of states of its own (appended to `[I, Ω, θ]`).
+    fn states(&self) -> usize {
+        0
+    }
+    /// Factor `r_e` on the armature resistance, from its own states.
+    fn resistance_factor(&self, _own: &[f64]) -> f64 {
+        1.0
+    }
+    /// Factor `l_e(I)` on the inductance at armature current `i` \[A\].
+    fn inductance_factor(&self, _i: f64) -> f64 {
+        1.0
+    }
+    /// Smallest [`Dynamics::inductance_factor`] over all currents.
+    fn min_inductance_factor(&self) -> f64 {
+        1.0
+    }
+    /// Voltage drop `V_e(I)` \[V\] in the armature circuit.
+    fn voltage_drop(&self, _i: f64) -> f64 {
+        0.0
+    }
+    /// Largest slope `dV_e/dI` \[Ω\] of the drop (an extra resistance for the fastest pole).
+    fn incremental_resistance(&self) -> f64 {
+        0.0
+    }
+    /// Load torque `T_e(Ω, θ)` \[N·m\] opposing the motor torque, at speed `w` \[rad/s\] and
+    /// angle `theta` \[rad\] (also felt at rest, `w = 0`).
+    fn load_torque(&self, _w: f64, _theta: f64) -> f64 {
+        0.0
+    }
+    /// The dry-friction level `T_c(Ω)` \[N·m\] at speed `w` for a motor of Coulomb torque
+    /// `ts`, if the effect sets it (at `w = 0`: the static friction that holds the rotor).
+    fn dry_friction(&self, _ts: f64, _w: f64) -> Option<f64> {
+        None
+    }
+    /// Derivatives of its own states, with armature current `i` \[A\] and the resistance `r`
+    /// \[Ω\] in effect.
+    fn derivative(&self, _i: f64, _r: f64, _own: &[f64], _d_own: &mut [f64]) {}
+    /// Which of its own states the current sensor reads \[A\], if not the armature current.
+    fn sensor_state(&self) -> Option<usize> {
+        None
+    }
+    /// The fastest rate \[1/s\] of its own dynamics on motor `p` (beyond R and L).
+    fn own_rate(&self, _p: &MotorParams) -> f64 {
+        0.0
+    }
+    /// Longest RK4 step \[s\] at speeds up to `speed` \[rad/s\] in magnitude.
+    fn step_limit(&self, _speed: f64) -> f64 {
+        f64::INFINITY
+    }
+}
+
+/// The nominal model adds nothing.
+struct Nominal;
+impl Dynamics for Nominal {}
+
+impl Effect {
+    /// Its part in the plant's equations.
+    pub(crate) fn dynamics(&self) -> &dyn Dynamics {
+        match self {
+            Effect::StribeckFriction(e) => e,
+            Effect::CoggingTorque(e) => e,
+            Effect::CurrentSensorLag(e) => e,
+            Effect::ThermalDrift(e) => e,
+            Effect::QuadraticDrag(e) => e,
+            Effect::BrushDrop(e) => e,
+            Effect::InductanceSaturation(e) => e,
+            Effect::None => &Nominal,
+        }
+    }
+}
+
+impl Dynamics for StribeckFriction {
+    /// `T_c(Ω) = Ts + (Tst − Ts) exp(−(Ω/Ωs)²)`: `Tst` at rest.
+    fn dry_friction(&self, ts: f64, w: f64) -> Option<f64> {
+        if w == 0.0 {
+            return Some(self.static_torque_nm);
+        }
+        let u = w / self.stribeck_speed_rad_s;
+        Some(ts + (self.static_torque_nm - ts) * (-u * u).exp())
+    }
+}
+
+impl Dynamics for CoggingTorque {
+    /// `A sin(N θ + φ)`.
+    fn load_torque(&self, _w: f64, theta: f64) -> f64 {
+        self.amplitude_nm * (f64::from(self.periods_per_rev) * theta + self.phase_rad).sin()
+    }
+    /// Small-oscillation pulsation of the rotor in a cogging well, `√(A N/J)`.
+    fn own_rate(&self, p: &MotorParams) -> f64 {
+        (self.amplitude_nm * f64::from(self.periods_per_rev) / p.j_kgm2).sqrt()
+    }
+    /// 1/40 of a cogging period at `speed`.
+    fn step_limit(&self, speed: f64) -> f64 {
+        let w = speed.abs() * f64::from(self.periods_per_rev);
+        if w > 0.0 {
+            std::f64::consts::TAU / w / STEPS_PER_COGGING_PERIOD
+        } else {
+            f64::INFINITY
+        }
+    }
+}
+
+impl Dynamics for CurrentSensorLag {
+    /// The sensor's current `I_f`.
+    fn states(&self) -> usize {
+        1
+    }
+    /// `τf dI_f/dt = I − I_f`.
+    fn derivative(&self, i: f64, _r: f64, own: &[f64], d_own: &mut [f64]) {
+        d_own[0] = (i - own[0]) / self.tau_f_s;
+    }
+    fn sensor_state(&self) -> Option<usize> {
+        Some(0)
+    }
+    fn own_rate(&self, _p: &MotorParams) -> f64 {
+        1.0 / self.tau_f_s
+    }
+}
+
+impl Dynamics for ThermalDrift {
+    /// The winding's temperature rise ΔT \[K\].
+    fn states(&self) -> usize {
+        1
+    }
+    /// `R = R0 (1 + α ΔT)`.
+    fn resistance_factor(&self, own: &[f64]) -> f64 {
+        1.0 + self.alpha_per_k * own[0]
+    }
+    /// `Cth dΔT/dt = I² R − ΔT/Rth`.
+    fn derivative(&self, i: f64, r: f64, own: &[f64], d_own: &mut [f64]) {
+        d_own[0] =
+            (i * i * r - own[0] / self.thermal_resistance_k_per_w) / self.thermal_capacity_j_per_k;
+    }
+}
+
+impl Dynamics for QuadraticDrag {
+    /// `c Ω|Ω|`.
+    fn load_torque(&self, w: f64, _theta: f64) -> f64 {
+        self.c_nms2_per_rad2 * w * w.abs()
+    }
+}
+
+impl Dynamics for BrushDrop {
+    /// `Vb clamp(I/I_knee, −1, 1)`.
+    fn voltage_drop(&self, i: f64) -> f64 {
+        self.drop_v * (i / self.knee_current_a).clamp(-1.0, 1.0)
+    }
+    /// The brush film's resistance below the knee, `Vb/I_knee`.
+    fn incremental_resistance(&self) -> f64 {
+        self.drop_v / self.knee_current_a
+    }
+}
+
+impl Dynamics for InductanceSaturation {
+    /// `r + (1 − r)/(1 + (I/I_sat)²)`.
+    fn inductance_factor(&self, i: f64) -> f64 {
+        let u = i / self.saturation_current_a;
+        self.min_ratio + (1.0 - self.min_ratio) / (1.0 + u * u)
+    }
+    fn min_inductance_factor(&self) -> f64 {
+        self.min_ratio
+    }
+}
