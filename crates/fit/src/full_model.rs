@@ -8,7 +8,7 @@
 //! ([`noise_std`]). Parameters are fitted as `θ = ln p` (all stay positive); the Jacobian is exact,
 //! by forward-mode dual numbers through the same code that computes the response.
 
-use motor_model::{Dual, MotorParams, MotorState, Real, StepResponse};
+use motor_model::{Dual, Effects, MotorParams, MotorState, Real, StepResponse};
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::FitError;
@@ -16,6 +16,7 @@ use crate::input_uncertainty::{
     fit_with_inputs, settled_current, Nuisance, NuisanceProblem, StepInputs,
 };
 use crate::lm::{solve, LeastSquares, LmSettings, NormalEquations, Termination};
+use crate::parameters::{names_of, units_of, EffectEstimate, Parameters, MOTOR};
 use crate::plausibility::{assess, RecordFacts, Refusal};
 use crate::stats::{sandwich_uncertainty, NeweyWest};
 
@@ -86,18 +87,44 @@ pub struct ChannelQuality {
     pub nrmse_fit_percent: f64,
 }
 
+/// One fitted channel of one record: the samples fitted, as measured and as the fitted model
+/// gives them (unit of the channel).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FittedChannel {
+    /// Index of the record (test) in the input.
+    pub record: usize,
+    /// Which channel.
+    pub channel: Channel,
+    /// Indices of the samples fitted in the record (those not left out as clipped).
+    pub samples: Vec<usize>,
+    /// The measured values at `samples` (for [`Channel::EncoderSpeed`], the central difference
+    /// of the measured angle).
+    pub measured: Vec<f64>,
+    /// The fitted model at `samples`.
+    pub model: Vec<f64>,
+}
+
 /// Result of the full-model identification.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FullFit {
     /// The identified motor.
     pub params: MotorParams,
+    /// The effects of the model at the solution (fitted parameters at their estimates, the
+    /// others as given); empty for the nominal model.
+    pub effects: Effects,
+    /// The fitted effect parameters with units and intervals, in the order of
+    /// [`Effects::fitted_slots`] (empty for the nominal model).
+    pub effect_estimates: Vec<EffectEstimate>,
+    /// The fitted channels at the solution, measured and modelled.
+    pub fitted: Vec<FittedChannel>,
     /// Standard errors of R, L, k, f, J, Ts (SI units); `None` if the fit has no
     /// degrees of freedom or a singular Jacobian (a parameter the data cannot determine).
     pub std_error: Option<[f64; 6]>,
     /// 95 % intervals `[lo, hi]` (t distribution, as `nlparci`, on a Newey–West covariance),
     /// SI units.
     pub ci95: Option<[[f64; 2]; 6]>,
-    /// Correlation matrix of the parameters (6 × 6).
+    /// Correlation matrix of all fitted parameters ((6 + n) × (6 + n), in the order of
+    /// [`FullFit::parameter_names`]).
     pub correlation: Option<DMatrix<f64>>,
     /// Per-channel fit quality.
     pub quality: Vec<ChannelQuality>,
@@ -111,9 +138,25 @@ pub struct FullFit {
     pub refusal: Option<Refusal>,
     /// Final weighted cost `½ Σ r²`.
     pub cost: f64,
+    /// The solution in the fit's coordinates (`θ`, see `parameters.rs`).
+    pub(crate) theta: Vec<f64>,
+    /// Covariance of `θ` behind the intervals, if any.
+    pub(crate) theta_covariance: Option<DMatrix<f64>>,
 }
 
 impl FullFit {
+    /// Names of the fitted parameters in the order of [`FullFit::correlation`]: `R`, `L`, `k`,
+    /// `f`, `J`, `Ts`, then `effect_name.key` of each effect estimate (e.g.
+    /// `quadratic_drag.c`).
+    pub fn parameter_names(&self) -> Vec<String> {
+        names_of(&self.effects.fitted_slots())
+    }
+
+    /// SI units of the fitted parameters, in the order of [`FullFit::parameter_names`].
+    pub fn parameter_units(&self) -> Vec<&'static str> {
+        units_of(&self.effects.fitted_slots())
+    }
+
     /// Whether the fit is a result: its solver converged and nothing refuses it.
     pub fn accepted(&self) -> bool {
         self.termination.converged() && self.refusal.is_none()
@@ -226,6 +269,8 @@ struct Weighted {
 }
 
 struct FullProblem {
+    /// θ: the motor's six logarithms.
+    parameters: Parameters,
     tests: Vec<Weighted>,
     n_residuals: usize,
     /// Per test: the step height and `t_first` as estimated, and their uncertainty.
@@ -313,14 +358,14 @@ impl FullProblem {
     fn score_covariance(&self, theta: &[f64]) -> Option<DMatrix<f64>> {
         let params = params_of::<Dual<6>>(theta, Dual::variable)?;
         // One accumulator per (test, channel): residuals stream interleaved across channels.
-        let mut series: Vec<Vec<NeweyWest<6>>> = self
+        let mut series: Vec<Vec<NeweyWest>> = self
             .tests
             .iter()
-            .map(|w| w.channels.iter().map(|_| NeweyWest::new(w.n)).collect())
+            .map(|w| w.channels.iter().map(|_| NeweyWest::new(6, w.n)).collect())
             .collect();
         self.for_each(params, |k, c, _, m, y, sigma| {
             let r = (m.v - y) / sigma;
-            series[k][c].push(m.d.map(|d| d / sigma * r));
+            series[k][c].push(&m.d.map(|d| d / sigma * r));
         });
         let mut total = DMatrix::zeros(6, 6);
         for nw in series.iter().flatten() {
@@ -575,91 +620,126 @@ pub fn identify_full_with_inputs(
         )
         .map(|(w, u)| (w.volts, w.t_first, u))
         .collect();
+    let parameters = Parameters::nominal();
+    let theta0 = parameters.encode(start, &Effects::none())?;
     let mut problem = FullProblem {
+        parameters,
         tests: weighted,
         n_residuals,
         inputs,
     };
-    fit_with_inputs(&mut problem, start, settings)
+    fit_with_inputs(&mut problem, &theta0, settings)
 }
 
-/// A least-squares problem in `θ = ln [R, L, k, f, J, Ts]` whose residuals are channels of
-/// records, each divided by its channel's noise level.
+/// A least-squares problem in θ (the motor's six logarithms, then the unconstrained
+/// coordinates of the fitted effect parameters: [`Parameters`]) whose residuals are channels
+/// of records, each divided by its channel's noise level.
 pub(crate) trait WeightedProblem: LeastSquares {
+    /// How θ maps to the motor and its effects.
+    fn parameters(&self) -> &Parameters;
     /// The noise level of every channel, in a fixed order.
     fn sigmas_mut(&mut self) -> Vec<&mut f64>;
-    /// Fit quality of every channel at `values`, in the order of [`Self::sigmas_mut`].
-    fn channel_quality(&self, values: [f64; 6]) -> Vec<ChannelQuality>;
+    /// Fit quality of every channel at `theta`, in the order of [`Self::sigmas_mut`].
+    fn channel_quality(&self, theta: &[f64]) -> Vec<ChannelQuality>;
     /// Newey–West covariance of the score `Jᵀr` at `theta` (channels independent).
     fn score_covariance(&self, theta: &[f64]) -> Option<DMatrix<f64>>;
     /// What the records show, for the plausibility of the result.
     fn facts(&self) -> RecordFacts;
+    /// Every fitted channel at `theta`, measured and modelled.
+    fn fitted_channels(&self, theta: &[f64]) -> Vec<FittedChannel>;
 }
 
-/// Fits `problem` from `start` in two stages and reports the parameters with their intervals.
+/// Fits `problem` from `theta0` in two stages and reports the parameters with their intervals.
 pub(crate) fn fit_weighted<P: WeightedProblem>(
     problem: &mut P,
-    start: &MotorParams,
+    theta0: &[f64],
     settings: LmSettings,
 ) -> Result<FullFit, FitError> {
-    let theta0: Vec<f64> = start.values().iter().map(|v| v.ln()).collect();
-    let first = solve(&*problem, &theta0, settings)?;
+    let first = solve(&*problem, theta0, settings)?;
     // Second stage: weight each channel by its own residual RMS at the first solution, so that
     // every channel's weighted residuals have unit variance and the pooled variance behind the
     // intervals describes each of them (feasible generalised least squares). Skipped when the
     // first stage did not converge or a channel fits exactly (noise-free data).
     let first_iterations = first.iterations;
-    let (report, iterations) = match params_of::<f64>(&first.params, |v, _| v) {
-        Some(values) if first.termination.converged() => {
-            let rms = problem.channel_quality(values);
-            let mut changed = false;
-            for (sigma, q) in problem.sigmas_mut().into_iter().zip(&rms) {
-                if q.rms_residual > 1e3 * *sigma * f64::EPSILON.sqrt() && q.rms_residual.is_finite()
-                {
-                    *sigma = q.rms_residual;
-                    changed = true;
-                }
-            }
-            if changed {
-                let second = solve(&*problem, &first.params, settings)?;
-                let total = first_iterations + second.iterations;
-                (second, total)
-            } else {
-                (first, first_iterations)
+    let (report, iterations) = if first.termination.converged()
+        && problem.parameters().decode(&first.params).is_some()
+    {
+        let rms = problem.channel_quality(&first.params);
+        let mut changed = false;
+        for (sigma, q) in problem.sigmas_mut().into_iter().zip(&rms) {
+            if q.rms_residual > 1e3 * *sigma * f64::EPSILON.sqrt() && q.rms_residual.is_finite() {
+                *sigma = q.rms_residual;
+                changed = true;
             }
         }
-        _ => (first, first_iterations),
+        if changed {
+            let second = solve(&*problem, &first.params, settings)?;
+            let total = first_iterations + second.iterations;
+            (second, total)
+        } else {
+            (first, first_iterations)
+        }
+    } else {
+        (first, first_iterations)
     };
-    let values: [f64; 6] = params_of::<f64>(&report.params, |v, _| v)
+    let theta = report.params.clone();
+    let (params, effects) = problem
+        .parameters()
+        .decode(&theta)
         .ok_or_else(|| FitError::Solver("parameters left the representable range".into()))?;
-    let params = MotorParams::from_values(values).map_err(FitError::model("fitted parameters"))?;
     // Intervals from the Newey–West sandwich (residuals of logged signals are rarely white),
-    // then the delta method σ_p = p σ_θ back to SI units.
+    // then the delta method through each parameter's transform back to SI units.
     let unc = problem
-        .score_covariance(&report.params)
+        .score_covariance(&theta)
         .and_then(|s| sandwich_uncertainty(&report.normal, &s));
-    let std_error = unc
-        .as_ref()
-        .map(|u| std::array::from_fn(|i| values[i] * u.std_error[i]));
-    let ci95 = unc.as_ref().map(|u| {
-        std::array::from_fn(|i| {
-            let half = values[i] * u.ci95_half_width[i];
-            [values[i] - half, values[i] + half]
-        })
-    });
-    let quality = problem.channel_quality(values);
-    let refusal = assess(&params, ci95.as_ref(), &quality, &problem.facts());
-    Ok(FullFit {
+    let mut fit = FullFit {
         params,
-        std_error,
-        ci95,
-        correlation: unc.map(|u| u.correlation),
-        quality,
+        effects,
+        effect_estimates: Vec::new(),
+        fitted: problem.fitted_channels(&theta),
+        std_error: None,
+        ci95: None,
+        correlation: None,
+        quality: problem.channel_quality(&theta),
         iterations,
         termination: report.termination,
-        refusal,
+        refusal: None,
         cost: report.normal.cost,
-    })
+        theta,
+        theta_covariance: None,
+    };
+    let dof = unc.as_ref().map_or(0, |u| u.dof);
+    set_intervals(
+        &mut fit,
+        problem.parameters(),
+        unc.map(|u| u.covariance),
+        dof,
+    );
+    fit.refusal = assess(&fit, &problem.facts());
+    Ok(fit)
+}
+
+/// Sets the intervals of `fit` (motor and effects, SI units) from the covariance of its θ
+/// with `dof` degrees of freedom; without a covariance (or with one that has no finite
+/// intervals) the intervals are left as they are, the effect estimates without intervals.
+pub(crate) fn set_intervals(
+    fit: &mut FullFit,
+    parameters: &Parameters,
+    cov_theta: Option<DMatrix<f64>>,
+    dof: usize,
+) {
+    let intervals = cov_theta
+        .as_ref()
+        .and_then(|c| parameters.intervals(&fit.theta, c, dof));
+    if let (Some(iv), Some(cov)) = (&intervals, cov_theta) {
+        fit.std_error = Some(std::array::from_fn(|i| iv.std_error[i]));
+        fit.ci95 = Some(std::array::from_fn(|i| iv.ci95[i]));
+        fit.correlation = Some(iv.correlation.clone());
+        fit.theta_covariance = Some(cov);
+    }
+    if intervals.is_some() || fit.effect_estimates.is_empty() {
+        fit.effect_estimates = parameters.estimates(&fit.theta, intervals.as_ref());
+    }
 }
 
 /// Quality of one channel from its sums: `sse = Σ(ŷ − y)²`, `sst = Σ(y − ȳ)²`, `n` samples.
@@ -684,7 +764,7 @@ pub(crate) fn quality_from_sums(
     }
 }
 
-fn channel_quality(problem: &FullProblem, values: [f64; 6]) -> Vec<ChannelQuality> {
+fn channel_quality(problem: &FullProblem, values: [f64; MOTOR]) -> Vec<ChannelQuality> {
     let mut sums: Vec<Vec<(f64, f64)>> = problem
         .tests
         .iter()
@@ -726,6 +806,40 @@ fn channel_quality(problem: &FullProblem, values: [f64; 6]) -> Vec<ChannelQualit
 }
 
 impl WeightedProblem for FullProblem {
+    fn parameters(&self) -> &Parameters {
+        &self.parameters
+    }
+
+    fn fitted_channels(&self, theta: &[f64]) -> Vec<FittedChannel> {
+        let Some(params) = params_of::<f64>(theta, |v, _| v) else {
+            return Vec::new();
+        };
+        let mut out: Vec<Vec<FittedChannel>> = self
+            .tests
+            .iter()
+            .enumerate()
+            .map(|(k, w)| {
+                w.channels
+                    .iter()
+                    .map(|ch| FittedChannel {
+                        record: k,
+                        channel: ch.kind,
+                        samples: Vec::with_capacity(ch.fitted()),
+                        measured: Vec::with_capacity(ch.fitted()),
+                        model: Vec::with_capacity(ch.fitted()),
+                    })
+                    .collect()
+            })
+            .collect();
+        self.for_each(params, |k, c, i, m, y, _| {
+            let f = &mut out[k][c];
+            f.samples.push(i);
+            f.measured.push(y);
+            f.model.push(m);
+        });
+        out.into_iter().flatten().collect()
+    }
+
     fn sigmas_mut(&mut self) -> Vec<&mut f64> {
         self.tests
             .iter_mut()
@@ -733,8 +847,8 @@ impl WeightedProblem for FullProblem {
             .collect()
     }
 
-    fn channel_quality(&self, values: [f64; 6]) -> Vec<ChannelQuality> {
-        channel_quality(self, values)
+    fn channel_quality(&self, theta: &[f64]) -> Vec<ChannelQuality> {
+        params_of::<f64>(theta, |v, _| v).map_or_else(Vec::new, |v| channel_quality(self, v))
     }
 
     fn score_covariance(&self, theta: &[f64]) -> Option<DMatrix<f64>> {

@@ -18,9 +18,9 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::FitError;
-use crate::full_model::{fit_weighted, FullFit, WeightedProblem};
+use crate::full_model::{fit_weighted, set_intervals, FullFit, WeightedProblem};
 use crate::lm::LmSettings;
-use crate::stats::{scaled_inverse, student_t_quantile};
+use crate::stats::scaled_inverse;
 
 /// Fraction of a level's samples at the column's extreme code above which that code is taken as
 /// an ADC rail (a Gaussian level away from a rail puts a vanishing fraction, about `1/n`, in its
@@ -359,7 +359,7 @@ pub(crate) trait NuisanceProblem: WeightedProblem {
     fn nuisances(&self) -> Vec<Nuisance>;
     /// Sets input `j` (in the order of [`Self::nuisances`]) to `value`.
     fn set_nuisance(&mut self, j: usize, value: f64);
-    /// The weighted residuals at `theta` and their Jacobian in θ (n × 6); fixes whatever
+    /// The weighted residuals at `theta` and their Jacobian in θ (n × p); fixes whatever
     /// discretisation the residuals at other inputs must share.
     fn linear_parts(&self, theta: &[f64]) -> Option<(Vec<f64>, DMatrix<f64>)>;
     /// The weighted residuals at `theta`, on the discretisation of the last
@@ -384,6 +384,7 @@ fn linearise<P: NuisanceProblem>(problem: &mut P, theta: &[f64]) -> Option<Joint
     let m = nuisances.len();
     let (r0, jt) = problem.linear_parts(theta)?;
     let n = r0.len();
+    let p = jt.ncols();
     let mut ju = DMatrix::zeros(n, m);
     for (j, u) in nuisances.iter().enumerate() {
         problem.set_nuisance(j, u.value + u.step);
@@ -415,47 +416,48 @@ fn linearise<P: NuisanceProblem>(problem: &mut P, theta: &[f64]) -> Option<Joint
     let schur = &d + b.transpose() * &g;
     let s = scaled_inverse(&schur)?;
     // The joint normal equations [[A, B], [Bᵀ, D]] (δθ, δu) = −(J_θᵀr, J_uᵀr + V⁻¹(u − ū)).
-    let mut h = DMatrix::zeros(6 + m, 6 + m);
-    h.view_mut((0, 0), (6, 6)).copy_from(&a);
-    h.view_mut((0, 6), (6, m)).copy_from(&b);
-    h.view_mut((6, 0), (m, 6)).copy_from(&b.transpose());
-    h.view_mut((6, 6), (m, m)).copy_from(&d);
-    let mut grad = DVector::zeros(6 + m);
-    grad.rows_mut(0, 6).copy_from(&jt.tr_mul(&r));
+    let mut h = DMatrix::zeros(p + m, p + m);
+    h.view_mut((0, 0), (p, p)).copy_from(&a);
+    h.view_mut((0, p), (p, m)).copy_from(&b);
+    h.view_mut((p, 0), (m, p)).copy_from(&b.transpose());
+    h.view_mut((p, p), (m, m)).copy_from(&d);
+    let mut grad = DVector::zeros(p + m);
+    grad.rows_mut(0, p).copy_from(&jt.tr_mul(&r));
     let offset = DVector::from_fn(m, |j, _| {
         (nuisances[j].value - nuisances[j].prior_mean) / nuisances[j].prior_variance
     });
-    grad.rows_mut(6, m).copy_from(&(ju.tr_mul(&r) + offset));
+    grad.rows_mut(p, m).copy_from(&(ju.tr_mul(&r) + offset));
     let step = -(scaled_inverse(&h)? * grad);
     step.iter()
         .all(|v| v.is_finite())
         .then_some(Joint { n, g, s, step })
 }
 
-/// Fits `problem` as [`fit_weighted`] does, then moves its uncertain inputs where the records
-/// put them (joint Gauss–Newton with their prior), refits, and widens the intervals by the
-/// inputs' posterior uncertainty (see the module documentation).
+/// Fits `problem` from `theta0` as [`fit_weighted`] does, then moves its uncertain inputs
+/// where the records put them (joint Gauss–Newton with their prior), refits, and widens the
+/// intervals by the inputs' posterior uncertainty (see the module documentation).
 pub(crate) fn fit_with_inputs<P: NuisanceProblem>(
     problem: &mut P,
-    start: &motor_model::MotorParams,
+    theta0: &[f64],
     settings: LmSettings,
 ) -> Result<FullFit, FitError> {
-    let mut fit = fit_weighted(problem, start, settings)?;
+    let mut fit = fit_weighted(problem, theta0, settings)?;
     if problem.nuisances().is_empty() {
         return Ok(fit);
     }
+    let p = problem.parameters().len();
     let mut iterations = fit.iterations;
     for _ in 0..REFINE_PASSES {
         if !fit.termination.converged() {
             return Ok(fit);
         }
-        let theta = ln_values(&fit);
+        let theta = fit.theta.clone();
         let Some(joint) = linearise(problem, &theta) else {
             return Ok(fit);
         };
         let nuisances = problem.nuisances();
         let m = nuisances.len();
-        let du = joint.step.rows(6, m);
+        let du = joint.step.rows(p, m);
         let small = nuisances
             .iter()
             .zip(du.iter())
@@ -468,60 +470,30 @@ pub(crate) fn fit_with_inputs<P: NuisanceProblem>(
         }
         let moved: Vec<f64> = theta
             .iter()
-            .zip(joint.step.rows(0, 6).iter())
-            .map(|(t, d)| (t + d).exp())
+            .zip(joint.step.rows(0, p).iter())
+            .map(|(t, d)| t + d)
             .collect();
-        let restart = motor_model::MotorParams::from_values(std::array::from_fn(|i| moved[i]))
-            .unwrap_or(fit.params);
+        let restart = if problem.parameters().decode(&moved).is_some() {
+            moved
+        } else {
+            theta
+        };
         let refit = fit_weighted(problem, &restart, settings)?;
         iterations += refit.iterations;
         fit = refit;
     }
     fit.iterations = iterations;
-    let theta = ln_values(&fit);
-    if let (Some(joint), Some(se), Some(corr)) = (
-        linearise(problem, &theta),
-        fit.std_error,
-        fit.correlation.clone(),
-    ) {
-        let values = fit.params.values();
-        let sd: Vec<f64> = (0..6).map(|i| se[i] / values[i]).collect();
-        let conditional = DMatrix::from_fn(6, 6, |i, j| corr[(i, j)] * sd[i] * sd[j]);
-        let added = &joint.g * &joint.s * joint.g.transpose();
-        let cov = conditional + added;
-        let n = joint.n.saturating_sub(6);
-        let t = student_t_quantile(0.975, n.max(1) as f64);
-        let sd_new: Vec<f64> = (0..6).map(|i| cov[(i, i)].max(0.0).sqrt()).collect();
-        if sd_new.iter().all(|s| s.is_finite()) {
-            fit.std_error = Some(std::array::from_fn(|i| values[i] * sd_new[i]));
-            fit.ci95 = Some(std::array::from_fn(|i| {
-                let half = t * values[i] * sd_new[i];
-                [values[i] - half, values[i] + half]
-            }));
-            fit.correlation = Some(DMatrix::from_fn(6, 6, |i, j| {
-                let den = sd_new[i] * sd_new[j];
-                if den > 0.0 {
-                    cov[(i, j)] / den
-                } else if i == j {
-                    1.0
-                } else {
-                    0.0
-                }
-            }));
-        }
+    let theta = fit.theta.clone();
+    if let (Some(joint), Some(conditional)) =
+        (linearise(problem, &theta), fit.theta_covariance.clone())
+    {
+        let cov = conditional + &joint.g * &joint.s * joint.g.transpose();
+        let dof = joint.n.saturating_sub(p);
+        set_intervals(&mut fit, problem.parameters(), Some(cov), dof);
     }
     // The widened intervals are the ones reported: judge the result on them.
-    fit.refusal = crate::plausibility::assess(
-        &fit.params,
-        fit.ci95.as_ref(),
-        &fit.quality,
-        &problem.facts(),
-    );
+    fit.refusal = crate::plausibility::assess(&fit, &problem.facts());
     Ok(fit)
-}
-
-fn ln_values(fit: &FullFit) -> Vec<f64> {
-    fit.params.values().iter().map(|v| v.ln()).collect()
 }
 
 #[cfg(test)]

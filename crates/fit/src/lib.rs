@@ -8,6 +8,9 @@
 //! - [`identify_full_with_inputs`], [`identify_output_error_with_inputs`]: the step heights,
 //!   levels and instants as measured inputs whose uncertainty enters the intervals
 //!   ([`estimate_level`], [`StepInputs`], [`LevelPrior`]).
+//! - [`identify_output_error_with_effects`]: the motor's six parameters and those of a set of
+//!   unmodelled effects (SPEC section 5) in one output-error fit, each named with its unit and
+//!   interval ([`EffectEstimate`]); every fit returns its fitted traces ([`FittedChannel`]).
 //!
 //! - [`diagnose`]: the sim-to-real diagnosis; [`diagnose::localise`] says where a model still
 //!   disagrees with the records, against the records' own noise floor.
@@ -42,6 +45,7 @@ mod mechanical;
 mod model33;
 mod output_error;
 mod paper_method;
+mod parameters;
 mod plausibility;
 mod signal;
 mod start;
@@ -60,8 +64,8 @@ pub use feedforward::{
     VoltageSpeedModel,
 };
 pub use full_model::{
-    identify_full, identify_full_with_inputs, noise_std, Channel, ChannelQuality, FullFit,
-    StepTest, PARAM_NAMES, PARAM_UNITS,
+    identify_full, identify_full_with_inputs, noise_std, Channel, ChannelQuality, FittedChannel,
+    FullFit, StepTest, PARAM_NAMES, PARAM_UNITS,
 };
 pub use input_uncertainty::{
     estimate_level, quantisation_bias_variance, LevelEstimate, LevelPrior, StepInputs, VoltageScale,
@@ -76,13 +80,15 @@ pub use mechanical::{
 pub use model33::{fit_33, Fit33, Params33, Record33};
 pub use output_error::{
     electrical_equation, equation_error_start, identify_output_error,
-    identify_output_error_with_inputs, voltage_input, voltage_levels, ExcitedRecord,
+    identify_output_error_with_effects, identify_output_error_with_inputs,
+    identify_output_error_with_inputs_and_effects, voltage_input, voltage_levels, ExcitedRecord,
 };
 pub use paper_method::{
     from_high_voltage, identify_paper, speed_check_c8, suggested_low_voltage_45,
     tau_m_as_printed_37, with_low_voltage, HighVoltageResult, PaperIdentification, SpeedCheck,
     TwoTestFriction,
 };
+pub use parameters::EffectEstimate;
 pub use plausibility::Refusal;
 pub use signal::{decimate, Butterworth};
 pub use start::steady_state_start;

@@ -348,26 +348,22 @@ pub fn identify_inverse_model_pooled(
     // Intervals from the Newey–West sandwich, record by record: the residuals of filtered,
     // decimated signals are correlated over several samples, and the plain least-squares
     // covariance would take them as independent.
-    let mut nw = NeweyWest::<4>::new(rows.first().map_or(0, |r| r.torque.len()));
+    let mut nw = NeweyWest::new(p, rows.first().map_or(0, |r| r.torque.len()));
     let mut at = 0;
+    let mut g = vec![0.0; p];
     for (k, r) in rows.iter().enumerate() {
         if k > 0 {
             nw.new_series(r.torque.len());
         }
         for i in at..at + r.torque.len() {
-            nw.push(std::array::from_fn(|j| {
-                if j < p {
-                    residual[i] * a[(i, j)]
-                } else {
-                    0.0
-                }
-            }));
+            for (j, gj) in g.iter_mut().enumerate() {
+                *gj = residual[i] * a[(i, j)];
+            }
+            nw.push(&g);
         }
         at += r.torque.len();
     }
-    let unc = nw
-        .finish()
-        .and_then(|s| sandwich_uncertainty(&normal, &s.view((0, 0), (p, p)).into_owned()));
+    let unc = nw.finish().and_then(|s| sandwich_uncertainty(&normal, &s));
     // A fixed offset is exactly 0, its interval [0, 0].
     let values: [f64; 4] = std::array::from_fn(|i| theta.get(i).copied().unwrap_or(0.0));
     let half = |u: &crate::stats::Uncertainty, i: usize| u.ci95_half_width.get(i).copied();

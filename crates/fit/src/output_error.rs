@@ -19,7 +19,7 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::error::FitError;
 use crate::full_model::{
-    fit_weighted, noise_std, quality_from_sums, Channel, ChannelQuality, FullFit, WeightedProblem,
+    noise_std, quality_from_sums, Channel, ChannelQuality, FittedChannel, FullFit, WeightedProblem,
 };
 use crate::input_uncertainty::{
     estimate_level, fit_with_inputs, LevelEstimate, LevelPrior, Nuisance, NuisanceProblem,
@@ -27,6 +27,7 @@ use crate::input_uncertainty::{
 };
 use crate::lm::{LeastSquares, LmSettings, NormalEquations};
 use crate::mechanical::{identify_inverse_model, InverseModelSettings};
+use crate::parameters::Parameters;
 use crate::plausibility::RecordFacts;
 use crate::signal::Butterworth;
 use crate::stats::NeweyWest;
@@ -42,6 +43,9 @@ const STEP_MARGIN: f64 = 0.5;
 // A record sampled fifty times slower than τe took minutes a fit at 1000 steps a sample, for
 // an L that its current, settled at every sample, cannot show.
 const MAX_STEPS_PER_SAMPLE: f64 = 200.0;
+/// Speed bound of the simulations over the largest measured |speed| (room for the fitted
+/// motor to run faster than the records while the step stays fixed).
+const SPEED_BOUND_MARGIN: f64 = 1.5;
 /// A voltage is piecewise constant when it has at most one jump per this many samples.
 const MIN_SAMPLES_PER_LEVEL: usize = 20;
 
@@ -194,6 +198,8 @@ struct OeRecord {
 }
 
 struct OeProblem {
+    /// How θ maps to the motor and the effects simulated with it.
+    parameters: Parameters,
     records: Vec<OeRecord>,
     n_residuals: usize,
     /// RK4 step \[s\] of every simulation (bits of an `f64`): fixed within an iteration of the
@@ -202,17 +208,21 @@ struct OeProblem {
     /// following the parameters from one iteration to the next (a start with a tiny L would
     /// otherwise keep a tiny step, and a slow fit, to the end).
     max_step_bits: AtomicU64,
-}
-
-/// `exp θ` as parameters, if representable.
-fn values_of(theta: &[f64]) -> Option<[f64; 6]> {
-    (theta.len() == 6 && theta.iter().all(|t| t.is_finite() && t.abs() < 700.0))
-        .then(|| std::array::from_fn(|i| theta[i].exp()))
+    /// Largest |speed| \[rad/s\] the simulations take their state-dependent steps (cogging)
+    /// at: [`SPEED_BOUND_MARGIN`] times the largest measured, so that the step count does not
+    /// follow the simulated speed ([`Simulator::with_speed_bound`]); `None` without a speed
+    /// channel.
+    speed_bound: Option<f64>,
 }
 
 impl OeProblem {
-    /// The problem of `records` (checked), simulated with RK4 steps of at most `max_step_s`.
-    fn new(records: &[ExcitedRecord<'_>], max_step_s: f64) -> Result<Self, FitError> {
+    /// The problem of `records` (checked) for the motor and `effects`, simulated with RK4
+    /// steps of at most `max_step_s`.
+    fn new(
+        records: &[ExcitedRecord<'_>],
+        effects: &Effects,
+        max_step_s: f64,
+    ) -> Result<Self, FitError> {
         let max_step_bits = AtomicU64::new(max_step_s.to_bits());
         let records = records
             .iter()
@@ -224,10 +234,20 @@ impl OeProblem {
             .flat_map(|r| &r.channels)
             .map(|c| c.data.len())
             .sum();
+        let peak_speed = records
+            .iter()
+            .flat_map(|r| &r.channels)
+            .filter(|c| c.kind != Channel::Current)
+            .flat_map(|c| c.data.iter())
+            .fold(0.0f64, |m, w| m.max(w.abs()));
+        let speed_bound =
+            (peak_speed > 0.0 && peak_speed.is_finite()).then_some(SPEED_BOUND_MARGIN * peak_speed);
         Ok(OeProblem {
+            parameters: Parameters::new(effects),
             records,
             n_residuals,
             max_step_bits,
+            speed_bound,
         })
     }
 
@@ -236,20 +256,46 @@ impl OeProblem {
         f64::from_bits(self.max_step_bits.load(Ordering::Relaxed))
     }
 
-    /// Uses the step that suits `values` from now on; `None` (and no change) where that step
-    /// would cost more than [`MAX_STEPS_PER_SAMPLE`] RK4 steps per sample of the fastest
-    /// record: a time constant that far below the sample period is outside what the records
-    /// show, and simulating it would take without bound.
-    fn set_step_for(&self, values: [f64; 6]) -> Option<()> {
-        let h = self.within_work_bound(values)?;
+    /// A simulator of `motor` and `effects` driven by `input`, with the speed bound.
+    fn simulator(
+        &self,
+        motor: MotorParams,
+        effects: Effects,
+        input: Input,
+    ) -> Result<Simulator, motor_model::ModelError> {
+        let sim = Simulator::new(motor, effects, input)?;
+        match self.speed_bound {
+            Some(w) => sim.with_speed_bound(w),
+            None => Ok(sim),
+        }
+    }
+
+    /// The RK4 step \[s\] for `motor` and `effects`: the simulator's own (1/40 of the fastest
+    /// time constant, and of a cogging period at the speed bound) with a margin.
+    fn step_for(&self, motor: &MotorParams, effects: &Effects) -> Option<f64> {
+        let step = Input::Step {
+            volts: 1.0,
+            at_s: 0.0,
+        };
+        self.simulator(*motor, *effects, step)
+            .ok()
+            .map(|s| s.max_step_s() * STEP_MARGIN)
+    }
+
+    /// Uses the step that suits `motor` and `effects` from now on; `None` (and no change)
+    /// where that step would cost more than [`MAX_STEPS_PER_SAMPLE`] RK4 steps per sample of
+    /// the fastest record: a time constant that far below the sample period is outside what
+    /// the records show, and simulating it would take without bound.
+    fn set_step_for(&self, motor: &MotorParams, effects: &Effects) -> Option<()> {
+        let h = self.within_work_bound(motor, effects)?;
         self.max_step_bits.store(h.to_bits(), Ordering::Relaxed);
         Some(())
     }
 
-    /// The RK4 step for `values`, `None` where it would take more than
+    /// The RK4 step for `motor` and `effects`, `None` where it would take more than
     /// [`MAX_STEPS_PER_SAMPLE`] steps per sample of the fastest record.
-    fn within_work_bound(&self, values: [f64; 6]) -> Option<f64> {
-        let h = step_for(values)?;
+    fn within_work_bound(&self, motor: &MotorParams, effects: &Effects) -> Option<f64> {
+        let h = self.step_for(motor, effects)?;
         let dt_min = self
             .records
             .iter()
@@ -258,15 +304,16 @@ impl OeProblem {
         (h * MAX_STEPS_PER_SAMPLE >= dt_min).then_some(h)
     }
 
-    /// The simulated channels of every record at `values`: `[record][channel][kept sample]`.
-    fn simulate(&self, values: [f64; 6]) -> Option<Vec<Vec<Vec<f64>>>> {
+    /// The simulated channels of every record at `theta`: `[record][channel][kept sample]`.
+    fn simulate(&self, theta: &[f64]) -> Option<Vec<Vec<Vec<f64>>>> {
+        let (motor, effects) = self.parameters.decode(theta)?;
         // Every evaluation within the work bound, trial steps included: the simulator's own
         // step follows the parameters' fastest time constant whatever the fixed step says.
-        self.within_work_bound(values)?;
-        let params = MotorParams::from_values(values).ok()?;
+        self.within_work_bound(&motor, &effects)?;
         let mut out = Vec::with_capacity(self.records.len());
         for rec in &self.records {
-            let sim = Simulator::new(params, Effects::none(), rec.input.clone())
+            let sim = self
+                .simulator(motor, effects, rec.input.clone())
                 .and_then(|s| s.with_max_step(self.max_step_s()))
                 .ok()?;
             let rate = 1.0 / rec.dt;
@@ -298,9 +345,9 @@ impl OeProblem {
             .then_some(out)
     }
 
-    /// Weighted residuals at `values`, in record/channel/sample order.
-    fn residuals(&self, values: [f64; 6]) -> Option<Vec<f64>> {
-        let sim = self.simulate(values)?;
+    /// Weighted residuals at `theta`, in record/channel/sample order.
+    fn residuals(&self, theta: &[f64]) -> Option<Vec<f64>> {
+        let sim = self.simulate(theta)?;
         let mut r = Vec::with_capacity(self.n_residuals);
         for (rec, simulated) in self.records.iter().zip(&sim) {
             for (ch, model) in rec.channels.iter().zip(simulated) {
@@ -310,19 +357,21 @@ impl OeProblem {
         Some(r)
     }
 
-    /// Residuals and their Jacobian in θ (forward differences, the six perturbed simulations
-    /// run in parallel).
+    /// Residuals and their Jacobian in θ (forward differences, the perturbed simulations run
+    /// in parallel).
     fn jacobian(&self, theta: &[f64]) -> Option<(Vec<f64>, DMatrix<f64>)> {
-        self.set_step_for(values_of(theta)?)?;
-        let r0 = self.residuals(values_of(theta)?)?;
+        let (motor, effects) = self.parameters.decode(theta)?;
+        self.set_step_for(&motor, &effects)?;
+        let r0 = self.residuals(theta)?;
+        let p = self.parameters.len();
         let columns: Vec<Option<Vec<f64>>> = std::thread::scope(|scope| {
-            let handles: Vec<_> = (0..6)
+            let handles: Vec<_> = (0..p)
                 .map(|j| {
                     let r0 = &r0;
                     scope.spawn(move || {
                         let mut th = theta.to_vec();
                         th[j] += FD_STEP;
-                        let r = self.residuals(values_of(&th)?)?;
+                        let r = self.residuals(&th)?;
                         Some(r.iter().zip(r0).map(|(a, b)| (a - b) / FD_STEP).collect())
                     })
                 })
@@ -332,7 +381,7 @@ impl OeProblem {
                 .map(|h| h.join().ok().flatten())
                 .collect()
         });
-        let mut jac = DMatrix::zeros(r0.len(), 6);
+        let mut jac = DMatrix::zeros(r0.len(), p);
         for (j, col) in columns.into_iter().enumerate() {
             let col = col?;
             jac.column_mut(j).copy_from_slice(&col);
@@ -343,11 +392,11 @@ impl OeProblem {
 
 impl LeastSquares for OeProblem {
     fn n_params(&self) -> usize {
-        6
+        self.parameters.len()
     }
 
     fn cost(&self, theta: &[f64]) -> Option<f64> {
-        let r = self.residuals(values_of(theta)?)?;
+        let r = self.residuals(theta)?;
         Some(0.5 * r.iter().map(|v| v * v).sum::<f64>())
     }
 
@@ -366,6 +415,10 @@ impl LeastSquares for OeProblem {
 }
 
 impl WeightedProblem for OeProblem {
+    fn parameters(&self) -> &Parameters {
+        &self.parameters
+    }
+
     fn facts(&self) -> RecordFacts {
         let mut facts = RecordFacts::default();
         for r in &self.records {
@@ -385,8 +438,8 @@ impl WeightedProblem for OeProblem {
             .collect()
     }
 
-    fn channel_quality(&self, values: [f64; 6]) -> Vec<ChannelQuality> {
-        let sim = self.simulate(values);
+    fn channel_quality(&self, theta: &[f64]) -> Vec<ChannelQuality> {
+        let sim = self.simulate(theta);
         let mut out = Vec::new();
         for (k, rec) in self.records.iter().enumerate() {
             for (c, ch) in rec.channels.iter().enumerate() {
@@ -408,19 +461,47 @@ impl WeightedProblem for OeProblem {
 
     fn score_covariance(&self, theta: &[f64]) -> Option<DMatrix<f64>> {
         let (r, jac) = self.jacobian(theta)?;
-        let mut total = DMatrix::zeros(6, 6);
+        let p = jac.ncols();
+        let mut total = DMatrix::zeros(p, p);
         let mut row = 0;
+        let mut g = vec![0.0; p];
         for rec in &self.records {
             for ch in &rec.channels {
-                let mut nw = NeweyWest::<6>::new(ch.data.len());
+                let mut nw = NeweyWest::new(p, ch.data.len());
                 for _ in 0..ch.data.len() {
-                    nw.push(std::array::from_fn(|j| r[row] * jac[(row, j)]));
+                    for (j, gj) in g.iter_mut().enumerate() {
+                        *gj = r[row] * jac[(row, j)];
+                    }
+                    nw.push(&g);
                     row += 1;
                 }
                 total += nw.finish()?;
             }
         }
         Some(total)
+    }
+
+    fn fitted_channels(&self, theta: &[f64]) -> Vec<FittedChannel> {
+        let Some(sim) = self.simulate(theta) else {
+            return Vec::new();
+        };
+        self.records
+            .iter()
+            .zip(sim)
+            .enumerate()
+            .flat_map(|(k, (rec, simulated))| {
+                rec.channels
+                    .iter()
+                    .zip(simulated)
+                    .map(move |(ch, model)| FittedChannel {
+                        record: k,
+                        channel: ch.kind,
+                        samples: ch.keep.clone(),
+                        measured: ch.data.clone(),
+                        model,
+                    })
+            })
+            .collect()
     }
 }
 
@@ -495,30 +576,26 @@ pub fn identify_output_error(
     start: &MotorParams,
     settings: LmSettings,
 ) -> Result<FullFit, FitError> {
-    start
-        .validate()
-        .map_err(FitError::model("start parameters"))?;
-    if start.ts_nm <= 0.0 {
-        return Err(bad(
-            "start parameters",
-            "Ts = 0: the fit works on ln Ts and needs a positive start".into(),
-        ));
-    }
-    if records.is_empty() {
-        return Err(bad("records", "no record given".into()));
-    }
-    let max_step_s =
-        step_for(start.values()).ok_or_else(|| bad("start parameters", "not simulable".into()))?;
-    let mut problem = OeProblem::new(records, max_step_s)?;
-    problem.set_step_for(start.values()).ok_or_else(|| {
-        bad(
-            "start parameters",
-            "a time constant (L/R or the mechanical one) more than 2.5 times below the sample period: \
-             the records cannot show it; give a start that matches them"
-                .into(),
-        )
-    })?;
-    fit_weighted(&mut problem, start, settings)
+    identify_output_error_with_inputs_and_effects(records, &[], start, &Effects::none(), settings)
+}
+
+/// [`identify_output_error`] of the motor with `effects` switched on: one fit of
+/// `θ = [ln R, ln L, ln k, ln f, ln J, ln Ts, θ_e…]`, the six motor parameters and the fitted
+/// parameters of the effects ([`Effects::fitted_slots`], each in its unconstrained coordinate,
+/// [`motor_model::ParamSpec::to_unconstrained`]; Stribeck's Tst as `ln(Tst − Ts)`), started
+/// from `start` and the values in `effects`. The simulation is the stick-slip simulator with
+/// those effects, on a fixed RK4 step and (with cogging) a speed bound 1.5 times the largest
+/// measured speed, so that it is smooth in θ. The results name every parameter:
+/// [`FullFit::effects`], [`FullFit::effect_estimates`] (value, standard error and 95 %
+/// interval in SI units by the delta method through each transform),
+/// [`FullFit::parameter_names`] for the rows of [`FullFit::correlation`].
+pub fn identify_output_error_with_effects(
+    records: &[ExcitedRecord<'_>],
+    start: &MotorParams,
+    effects: &Effects,
+    settings: LmSettings,
+) -> Result<FullFit, FitError> {
+    identify_output_error_with_inputs_and_effects(records, &[], start, effects, settings)
 }
 
 /// [`identify_output_error`] with what each record leaves unknown about its voltage levels
@@ -531,10 +608,25 @@ pub fn identify_output_error_with_inputs(
     start: &MotorParams,
     settings: LmSettings,
 ) -> Result<FullFit, FitError> {
-    if priors.is_empty() {
-        return identify_output_error(records, start, settings);
-    }
-    if priors.len() != records.len() {
+    identify_output_error_with_inputs_and_effects(
+        records,
+        priors,
+        start,
+        &Effects::none(),
+        settings,
+    )
+}
+
+/// [`identify_output_error_with_inputs`] of the motor with `effects`
+/// (see [`identify_output_error_with_effects`]).
+pub fn identify_output_error_with_inputs_and_effects(
+    records: &[ExcitedRecord<'_>],
+    priors: &[Vec<LevelPrior>],
+    start: &MotorParams,
+    effects: &Effects,
+    settings: LmSettings,
+) -> Result<FullFit, FitError> {
+    if !priors.is_empty() && priors.len() != records.len() {
         return Err(bad(
             "level priors",
             format!(
@@ -544,18 +636,25 @@ pub fn identify_output_error_with_inputs(
             ),
         ));
     }
-    start
-        .validate()
-        .map_err(|e| bad("start parameters", e.to_string()))?;
-    if start.ts_nm <= 0.0 {
-        return Err(bad(
-            "start parameters",
-            "Ts = 0: the fit works on ln Ts and needs a positive start".into(),
-        ));
+    if records.is_empty() {
+        return Err(bad("records", "no record given".into()));
     }
-    let max_step_s =
-        step_for(start.values()).ok_or_else(|| bad("start parameters", "not simulable".into()))?;
-    let mut problem = OeProblem::new(records, max_step_s)?;
+    let mut problem = OeProblem::new(records, effects, f64::INFINITY)?;
+    let theta0 = problem.parameters.encode(start, effects)?;
+    let h = problem
+        .step_for(start, effects)
+        .ok_or_else(|| bad("start parameters", "not simulable".into()))?;
+    problem.max_step_bits.store(h.to_bits(), Ordering::Relaxed);
+    if priors.is_empty() {
+        problem.set_step_for(start, effects).ok_or_else(|| {
+            bad(
+                "start parameters",
+                "a time constant (L/R or the mechanical one) more than 2.5 times below the sample period: \
+                 the records cannot show it; give a start that matches them"
+                    .into(),
+            )
+        })?;
+    }
     for (k, (rec, p)) in problem.records.iter_mut().zip(priors).enumerate() {
         if p.is_empty() {
             continue;
@@ -590,7 +689,7 @@ pub fn identify_output_error_with_inputs(
             .map(|((v, t), q)| (*v, *t, *q))
             .collect();
     }
-    fit_with_inputs(&mut problem, start, settings)
+    fit_with_inputs(&mut problem, &theta0, settings)
 }
 
 /// Relative step of the central difference in a level.
@@ -675,21 +774,8 @@ impl NuisanceProblem for OeProblem {
     }
 
     fn residual_vector(&self, theta: &[f64]) -> Option<Vec<f64>> {
-        self.residuals(values_of(theta)?)
+        self.residuals(theta)
     }
-}
-
-/// The RK4 step \[s\] for parameters `values`: the simulator's own (1/40 of the fastest time
-/// constant) with a margin.
-fn step_for(values: [f64; 6]) -> Option<f64> {
-    let params = MotorParams::from_values(values).ok()?;
-    let step = Input::Step {
-        volts: 1.0,
-        at_s: 0.0,
-    };
-    Simulator::new(params, Effects::none(), step)
-        .ok()
-        .map(|s| s.max_step_s() * STEP_MARGIN)
 }
 
 /// Cut-offs tried by [`equation_error_start`], as fractions of the sample rate.
@@ -706,13 +792,13 @@ const START_CUTOFFS: [f64; 4] = [0.1, 0.02, 0.004, 0.0008];
 /// simulation fits the records best (output-error cost) is returned. Values the records cannot
 /// resolve (an L below one sample, no friction seen) are replaced by small positive ones.
 pub fn equation_error_start(records: &[ExcitedRecord<'_>]) -> Result<MotorParams, FitError> {
-    let problem = OeProblem::new(records, f64::INFINITY)?;
+    let problem = OeProblem::new(records, &Effects::none(), f64::INFINITY)?;
     let mut best: Option<(f64, MotorParams)> = None;
     let mut first_error = None;
     for fraction in START_CUTOFFS {
         match equation_error_estimate(records, fraction) {
             Ok(start) => {
-                if problem.set_step_for(start.values()).is_none() {
+                if problem.set_step_for(&start, &Effects::none()).is_none() {
                     first_error.get_or_insert(bad(
                         "records",
                         format!(
@@ -723,6 +809,7 @@ pub fn equation_error_start(records: &[ExcitedRecord<'_>]) -> Result<MotorParams
                     continue;
                 }
                 let theta: Vec<f64> = start.values().iter().map(|v| v.ln()).collect();
+                debug_assert_eq!(theta.len(), problem.parameters.len());
                 let cost = problem.cost(&theta).unwrap_or(f64::INFINITY);
                 if best.as_ref().is_none_or(|(c, _)| cost < *c) {
                     best = Some((cost, start));

@@ -7,9 +7,10 @@
 
 use std::fmt;
 
-use motor_model::MotorParams;
+use motor_model::{Domain, MotorParams};
 
-use crate::full_model::{Channel, ChannelQuality};
+use crate::full_model::{Channel, ChannelQuality, FullFit};
+use crate::parameters::EffectEstimate;
 
 /// A time constant below this fraction of the sample period is not seen by the records: the
 /// transient is over a thousand times faster than one sample.
@@ -43,7 +44,8 @@ pub enum Refusal {
     /// A parameter's 95 % interval is wider than the value itself (it reaches zero): the
     /// records do not determine it, and a linearised interval that wide is no longer honest.
     Undetermined {
-        /// The parameter (`R`, `L`, `k`, `f`, `J`, `Ts`).
+        /// The parameter (`R`, `L`, `k`, `f`, `J`, `Ts`, or an effect parameter's symbol,
+        /// e.g. `τf`).
         parameter: &'static str,
         /// Half-width of its interval over its value.
         relative_half_width: f64,
@@ -94,10 +96,26 @@ pub(crate) struct RecordFacts {
     pub moved: bool,
 }
 
-/// The reason to refuse a converged fit of `params`, if any.
-pub(crate) fn assess(
+/// The reason to refuse a converged fit, if any: [`assess_parts`] on its motor, intervals,
+/// effect estimates and quality.
+pub(crate) fn assess(fit: &FullFit, facts: &RecordFacts) -> Option<Refusal> {
+    assess_parts(
+        &fit.params,
+        fit.ci95.as_ref(),
+        &fit.effect_estimates,
+        &fit.quality,
+        facts,
+    )
+}
+
+/// The reason to refuse a converged fit of `params`, if any. An effect parameter that must be
+/// positive (a time constant, a speed or current scale: [`Domain::Positive`]) is judged as a
+/// motor parameter is; an effect's size (which may be 0) or phase is reported with its
+/// interval and left to the caller's significance test.
+pub(crate) fn assess_parts(
     params: &MotorParams,
     ci95: Option<&[[f64; 2]; 6]>,
+    effects: &[EffectEstimate],
     quality: &[ChannelQuality],
     facts: &RecordFacts,
 ) -> Option<Refusal> {
@@ -148,11 +166,28 @@ pub(crate) fn assess(
         return Some(Refusal::NoIntervals);
     };
     let values = p.values();
-    (0..6)
-        .map(|i| (i, 0.5 * (ci[i][1] - ci[i][0]) / values[i]))
+    let motor = (0..6).map(|i| {
+        (
+            crate::full_model::PARAM_NAMES[i],
+            0.5 * (ci[i][1] - ci[i][0]) / values[i],
+        )
+    });
+    let positive_effects = effects
+        .iter()
+        .filter(|e| {
+            e.effect
+                .param(e.key)
+                .is_some_and(|s| s.domain == Domain::Positive)
+        })
+        .map(|e| {
+            let rel = e.ci95.map_or(f64::NAN, |c| 0.5 * (c[1] - c[0]) / e.value);
+            (e.symbol, rel)
+        });
+    motor
+        .chain(positive_effects)
         .find(|&(_, rel)| rel.is_nan() || rel > 1.0)
-        .map(|(i, rel)| Refusal::Undetermined {
-            parameter: crate::full_model::PARAM_NAMES[i],
+        .map(|(parameter, rel)| Refusal::Undetermined {
+            parameter,
             relative_half_width: rel,
         })
 }
@@ -233,9 +268,10 @@ mod tests {
     #[test]
     fn the_paper_motor_on_its_records_is_accepted() {
         assert_eq!(
-            assess(
+            assess_parts(
                 &paper(),
                 Some(&ci(&paper(), 0.01)),
+                &[],
                 &[quality(98.4)],
                 &facts()
             ),
@@ -247,7 +283,7 @@ mod tests {
     fn each_impossibility_is_named() {
         // A model worse than the channel's mean (the 40 V step fitted to Ts = 2443 N·m).
         assert!(matches!(
-            assess(&paper(), Some(&ci(&paper(), 0.01)), &[quality(-208.9)], &facts()),
+            assess_parts(&paper(), Some(&ci(&paper(), 0.01)), &[], &[quality(-208.9)], &facts()),
             Some(Refusal::WorseThanConstant { nrmse, .. }) if (nrmse - 3.089).abs() < 1e-9
         ));
         // A Coulomb torque the motor's largest torque never overcomes, though it turned.
@@ -256,7 +292,7 @@ mod tests {
             ..paper()
         };
         assert!(matches!(
-            assess(&stuck, Some(&ci(&stuck, 0.01)), &[], &facts()),
+            assess_parts(&stuck, Some(&ci(&stuck, 0.01)), &[], &[], &facts()),
             Some(Refusal::Implausible { reason }) if reason.contains("Ts")
         ));
         // The same torque is possible when nothing shows the motor turning.
@@ -264,14 +300,17 @@ mod tests {
             moved: false,
             ..facts()
         };
-        assert_eq!(assess(&stuck, Some(&ci(&stuck, 0.01)), &[], &still), None);
+        assert_eq!(
+            assess_parts(&stuck, Some(&ci(&stuck, 0.01)), &[], &[], &still),
+            None
+        );
         // L = 7e-91 H (100 kHz records fitted from a wrong start): τe far below a sample.
         let no_l = MotorParams {
             l_henry: 7e-91,
             ..paper()
         };
         assert!(matches!(
-            assess(&no_l, Some(&ci(&no_l, 0.01)), &[], &facts()),
+            assess_parts(&no_l, Some(&ci(&no_l, 0.01)), &[], &[], &facts()),
             Some(Refusal::Implausible { reason }) if reason.contains("tau_e")
         ));
         // A mechanical time constant a thousand record spans long.
@@ -280,18 +319,18 @@ mod tests {
             ..paper()
         };
         assert!(matches!(
-            assess(&heavy, Some(&ci(&heavy, 0.01)), &[], &facts()),
+            assess_parts(&heavy, Some(&ci(&heavy, 0.01)), &[], &[], &facts()),
             Some(Refusal::Implausible { reason }) if reason.contains("J is not determined")
         ));
         assert_eq!(
-            assess(&paper(), None, &[], &facts()),
+            assess_parts(&paper(), None, &[], &[], &facts()),
             Some(Refusal::NoIntervals)
         );
         // k = 6e-12 N·m/A ± 3.5e7 % (9-sample records at 24 Hz): not determined.
         let mut wide = ci(&paper(), 0.01);
         wide[2] = [-0.5, 0.8];
         assert!(matches!(
-            assess(&paper(), Some(&wide), &[], &facts()),
+            assess_parts(&paper(), Some(&wide), &[], &[], &facts()),
             Some(Refusal::Undetermined { parameter: "k", .. })
         ));
     }

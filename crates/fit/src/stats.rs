@@ -153,57 +153,73 @@ pub fn newey_west_score_covariance(
 }
 
 /// Newey–West accumulator of the covariance of a score `Σᵢ gᵢ` over one time series of
-/// per-sample scores `gᵢ = rᵢ ∂rᵢ/∂θ` (`N` parameters):
+/// per-sample scores `gᵢ = rᵢ ∂rᵢ/∂θ` (`p` parameters):
 /// `Σᵢ gᵢgᵢᵀ + Σₗ wₗ Σᵢ (gᵢgᵢ₋ₗᵀ + gᵢ₋ₗgᵢᵀ)` with Bartlett weights `wₗ = 1 − l/(L+1)`.
 /// Feed one series (a channel of a record) with [`NeweyWest::push`], then call
 /// [`NeweyWest::new_series`] before the next; series are taken as independent of each other.
 #[derive(Debug, Clone)]
-pub struct NeweyWest<const N: usize> {
-    sum: [[f64; N]; N],
-    ring: Vec<[f64; N]>,
+pub struct NeweyWest {
+    p: usize,
+    /// `p × p`, row-major.
+    sum: Vec<f64>,
+    /// The last `L` scores, `p` each, as a ring.
+    ring: Vec<f64>,
+    lags: usize,
     seen: usize,
 }
 
-impl<const N: usize> NeweyWest<N> {
-    /// An empty accumulator for series of about `n` samples ([`newey_west_lags`]).
-    pub fn new(n: usize) -> Self {
+impl NeweyWest {
+    /// An empty accumulator of scores of `p` parameters for series of about `n` samples
+    /// ([`newey_west_lags`]).
+    pub fn new(p: usize, n: usize) -> Self {
+        let lags = newey_west_lags(n).max(1);
         NeweyWest {
-            sum: [[0.0; N]; N],
-            ring: vec![[0.0; N]; newey_west_lags(n).max(1)],
+            p,
+            sum: vec![0.0; p * p],
+            ring: vec![0.0; lags * p],
+            lags,
             seen: 0,
         }
     }
 
     /// Starts a new independent series of about `n` samples.
     pub fn new_series(&mut self, n: usize) {
-        self.ring = vec![[0.0; N]; newey_west_lags(n).max(1)];
+        self.lags = newey_west_lags(n).max(1);
+        self.ring = vec![0.0; self.lags * self.p];
         self.seen = 0;
     }
 
-    /// Adds the next score of the current series.
-    pub fn push(&mut self, g: [f64; N]) {
-        let lags = self.ring.len();
-        for a in 0..N {
-            for b in 0..N {
-                self.sum[a][b] += g[a] * g[b];
+    /// Adds the next score of the current series (`p` values; extra ones are ignored, missing
+    /// ones count as 0).
+    pub fn push(&mut self, g: &[f64]) {
+        let p = self.p;
+        let lags = self.lags;
+        let g = &g[..p.min(g.len())];
+        for (a, ga) in g.iter().enumerate() {
+            for (b, gb) in g.iter().enumerate() {
+                self.sum[a * p + b] += ga * gb;
             }
         }
         for l in 1..=lags.min(self.seen) {
             let weight = 1.0 - l as f64 / (lags as f64 + 1.0);
-            let past = self.ring[(self.seen - l) % lags];
-            for a in 0..N {
-                for b in 0..N {
-                    self.sum[a][b] += weight * (g[a] * past[b] + past[a] * g[b]);
+            let slot = (self.seen - l) % lags;
+            let past = &self.ring[slot * p..(slot + 1) * p];
+            for (a, ga) in g.iter().enumerate() {
+                for (b, gb) in g.iter().enumerate() {
+                    self.sum[a * p + b] += weight * (ga * past[b] + past[a] * gb);
                 }
             }
         }
-        self.ring[self.seen % lags] = g;
+        let slot = self.seen % lags;
+        let dst = &mut self.ring[slot * p..(slot + 1) * p];
+        dst.fill(0.0);
+        dst[..g.len()].copy_from_slice(g);
         self.seen += 1;
     }
 
-    /// The accumulated covariance, `None` if any entry is not finite.
+    /// The accumulated covariance (`p × p`), `None` if any entry is not finite.
     pub fn finish(&self) -> Option<DMatrix<f64>> {
-        let m = DMatrix::from_fn(N, N, |a, b| self.sum[a][b]);
+        let m = DMatrix::from_row_slice(self.p, self.p, &self.sum);
         m.iter().all(|v| v.is_finite()).then_some(m)
     }
 }
