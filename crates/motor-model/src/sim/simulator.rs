@@ -266,16 +266,26 @@ impl Simulator {
             // Spread the steps evenly over the remaining interval.
             let steps = (remaining / h).ceil().max(1.0);
             let h = remaining / steps;
-            self.step_with_events(x, mode, t, h);
+            self.step_with_events(x, mode, t, h, t_to);
             t = if steps <= 1.0 { t_to } else { t + h };
         }
     }
     /// One RK4 step of length `h` from `t`, switching mode at breakaway and zero crossings.
-    fn step_with_events<const N: usize>(&self, x: &mut State<N>, mode: &mut Mode, t: f64, h: f64) {
+    ///
+    /// `t_end` is the end of the interval being integrated: the input is taken as its value
+    /// just before `t_end` there (a jump of E(t) at `t_end` belongs to the next interval).
+    fn step_with_events<const N: usize>(
+        &self,
+        x: &mut State<N>,
+        mode: &mut Mode,
+        t: f64,
+        h: f64,
+        t_end: f64,
+    ) {
         let mut t = t;
         let mut left = h;
         for _ in 0..MAX_EVENTS_PER_STEP {
-            let x1 = self.rk4(x, *mode, t, left);
+            let x1 = self.rk4(x, *mode, t, left, t_end);
             let switched = match *mode {
                 Mode::Stuck => self.breaks_away(&x1),
                 Mode::Moving(d) => d * x1[W_IDX] < 0.0,
@@ -288,7 +298,7 @@ impl Simulator {
             let (mut lo, mut hi) = (0.0_f64, 1.0_f64);
             for _ in 0..EVENT_BISECTIONS {
                 let mid = 0.5 * (lo + hi);
-                let xm = self.rk4(x, *mode, t, mid * left);
+                let xm = self.rk4(x, *mode, t, mid * left, t_end);
                 let happened = match *mode {
                     Mode::Stuck => self.breaks_away(&xm),
                     Mode::Moving(d) => d * xm[W_IDX] <= 0.0,
@@ -299,7 +309,7 @@ impl Simulator {
                     lo = mid;
                 }
             }
-            let mut xs = self.rk4(x, *mode, t, hi * left);
+            let mut xs = self.rk4(x, *mode, t, hi * left, t_end);
             xs[W_IDX] = 0.0;
             *mode = self.mode_at_rest(&xs);
             *x = xs;
@@ -309,7 +319,7 @@ impl Simulator {
                 return;
             }
         }
-        *x = self.rk4(x, *mode, t, left);
+        *x = self.rk4(x, *mode, t, left, t_end);
     }
 
     /// Torque acting on the rotor at rest apart from friction \[N·m\]: `k I − T_load(0, θ)`.
@@ -337,11 +347,30 @@ impl Simulator {
         }
     }
 
-    fn rk4<const N: usize>(&self, x: &State<N>, mode: Mode, t: f64, h: f64) -> State<N> {
-        let k1 = self.derivative(x, mode, t);
-        let k2 = self.derivative(&axpy(x, 0.5 * h, &k1), mode, t + 0.5 * h);
-        let k3 = self.derivative(&axpy(x, 0.5 * h, &k2), mode, t + 0.5 * h);
-        let k4 = self.derivative(&axpy(x, h, &k3), mode, t + h);
+    /// One classical RK4 step of length `h` from `t`, inside an interval ending at `t_end`
+    /// with no jump of the input before it: the stages take the input's left limit at
+    /// `t_end` (evaluating a piecewise-constant input after its jump in the last stage would
+    /// apply the new level for a sixth of the step).
+    fn rk4<const N: usize>(
+        &self,
+        x: &State<N>,
+        mode: Mode,
+        t: f64,
+        h: f64,
+        t_end: f64,
+    ) -> State<N> {
+        let volts = |s: f64| {
+            if s >= t_end {
+                self.input.volts_at(t_end.next_down())
+            } else {
+                self.input.volts_at(s)
+            }
+        };
+        let v_mid = volts(t + 0.5 * h);
+        let k1 = self.derivative(x, mode, volts(t));
+        let k2 = self.derivative(&axpy(x, 0.5 * h, &k1), mode, v_mid);
+        let k3 = self.derivative(&axpy(x, 0.5 * h, &k2), mode, v_mid);
+        let k4 = self.derivative(&axpy(x, h, &k3), mode, volts(t + h));
         let mut out = *x;
         for (i, o) in out.iter_mut().enumerate() {
             *o += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
@@ -352,8 +381,9 @@ impl Simulator {
         out
     }
 
-    /// `dx/dt` of the state in the given mode (module docs).
-    fn derivative<const N: usize>(&self, x: &State<N>, mode: Mode, t: f64) -> State<N> {
+    /// `dx/dt` of the state in the given mode under armature voltage `volts` \[V\] (module
+    /// docs).
+    fn derivative<const N: usize>(&self, x: &State<N>, mode: Mode, volts: f64) -> State<N> {
         let p = &self.params;
         let i = x[I_IDX];
         let w = x[W_IDX];
@@ -383,7 +413,7 @@ impl Simulator {
                 p.k_nm_per_a * w
             }
         };
-        dx[I_IDX] = (self.input.volts_at(t) - v_drop - r * i - back_emf) / l;
+        dx[I_IDX] = (volts - v_drop - r * i - back_emf) / l;
         for a in &self.active {
             let (own, d_own) = (a.own(x), &mut dx[a.offset..a.offset + a.states]);
             a.effect.dynamics().derivative(i, r, own, d_own);
