@@ -554,15 +554,9 @@ pub fn identify_full_with_inputs(
             reason: "variances must be finite and ≥ 0, the delay finite".into(),
         });
     }
-    start
-        .validate()
-        .map_err(FitError::model("start parameters"))?;
-    if start.ts_nm <= 0.0 {
-        return Err(FitError::BadData {
-            series: "start parameters".into(),
-            reason: "Ts = 0: the full model fits ln Ts and needs a positive start".into(),
-        });
-    }
+    // The start is checked where it becomes θ (before any record is read).
+    let parameters = Parameters::nominal();
+    let theta0 = parameters.encode(start, &Effects::none())?;
     if tests.is_empty() {
         return Err(FitError::BadData {
             series: "step tests".into(),
@@ -620,8 +614,6 @@ pub fn identify_full_with_inputs(
         )
         .map(|(w, u)| (w.volts, w.t_first, u))
         .collect();
-    let parameters = Parameters::nominal();
-    let theta0 = parameters.encode(start, &Effects::none())?;
     let mut problem = FullProblem {
         parameters,
         tests: weighted,

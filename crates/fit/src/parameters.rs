@@ -14,7 +14,7 @@ use nalgebra::DMatrix;
 
 use crate::error::FitError;
 use crate::full_model::{PARAM_NAMES, PARAM_UNITS};
-use crate::stats::student_t_quantile;
+use crate::stats::from_covariance;
 
 /// Number of motor parameters at the head of θ.
 pub(crate) const MOTOR: usize = 6;
@@ -172,31 +172,17 @@ impl Parameters {
         let v = self.values(theta)?;
         let d = self.value_jacobian(theta)?;
         let cov = &d * cov_theta * d.transpose();
-        let p = self.len();
-        let sd: Vec<f64> = (0..p).map(|i| cov[(i, i)].max(0.0).sqrt()).collect();
-        if sd.iter().any(|s| !s.is_finite()) {
-            return None;
-        }
-        let t = student_t_quantile(0.975, dof.max(1) as f64);
+        // Standard errors and correlations as every other fit here reports them.
+        let u = from_covariance(cov, dof.max(1), f64::NAN)?;
         let ci95 = v
             .iter()
-            .zip(&sd)
-            .map(|(x, s)| [x - t * s, x + t * s])
+            .zip(&u.ci95_half_width)
+            .map(|(x, half)| [x - half, x + half])
             .collect();
-        let correlation = DMatrix::from_fn(p, p, |i, j| {
-            let den = sd[i] * sd[j];
-            if den > 0.0 {
-                cov[(i, j)] / den
-            } else if i == j {
-                1.0
-            } else {
-                0.0
-            }
-        });
         Some(Intervals {
-            std_error: sd,
+            std_error: u.std_error,
             ci95,
-            correlation,
+            correlation: u.correlation,
         })
     }
 

@@ -83,7 +83,7 @@ pub(crate) fn scaled_inverse(m: &DMatrix<f64>) -> Option<DMatrix<f64>> {
 }
 
 /// Standard errors, Student-t 95 % half-widths and correlations of a covariance matrix.
-fn from_covariance(
+pub(crate) fn from_covariance(
     covariance: DMatrix<f64>,
     dof: usize,
     residual_variance: f64,
