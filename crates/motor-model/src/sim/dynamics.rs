@@ -77,19 +77,63 @@ pub(crate) trait Dynamics {
 struct Nominal;
 impl Dynamics for Nominal {}
 
-impl Effect {
-    /// Its part in the plant's equations.
-    pub(crate) fn dynamics(&self) -> &dyn Dynamics {
-        match self {
-            Effect::StribeckFriction(e) => e,
-            Effect::CoggingTorque(e) => e,
-            Effect::CurrentSensorLag(e) => e,
-            Effect::ThermalDrift(e) => e,
-            Effect::QuadraticDrag(e) => e,
-            Effect::BrushDrop(e) => e,
-            Effect::InductanceSaturation(e) => e,
-            Effect::None => &Nominal,
+/// Calls `$call` on the effect inside `$effect` (static dispatch, so that the simulator's inner
+/// loop inlines each effect's equations).
+macro_rules! on_effect {
+    ($effect:expr, $e:ident => $call:expr) => {
+        match $effect {
+            Effect::StribeckFriction($e) => $call,
+            Effect::CoggingTorque($e) => $call,
+            Effect::CurrentSensorLag($e) => $call,
+            Effect::ThermalDrift($e) => $call,
+            Effect::QuadraticDrag($e) => $call,
+            Effect::BrushDrop($e) => $call,
+            Effect::InductanceSaturation($e) => $call,
+            Effect::None => {
+                let $e = &Nominal;
+                $call
+            }
         }
+    };
+}
+
+/// An effect's part is that of the effect it holds.
+impl Dynamics for Effect {
+    fn states(&self) -> usize {
+        on_effect!(self, e => e.states())
+    }
+    fn resistance_factor(&self, own: &[f64]) -> f64 {
+        on_effect!(self, e => e.resistance_factor(own))
+    }
+    fn inductance_factor(&self, i: f64) -> f64 {
+        on_effect!(self, e => e.inductance_factor(i))
+    }
+    fn min_inductance_factor(&self) -> f64 {
+        on_effect!(self, e => e.min_inductance_factor())
+    }
+    fn voltage_drop(&self, i: f64) -> f64 {
+        on_effect!(self, e => e.voltage_drop(i))
+    }
+    fn incremental_resistance(&self) -> f64 {
+        on_effect!(self, e => e.incremental_resistance())
+    }
+    fn load_torque(&self, w: f64, theta: f64) -> f64 {
+        on_effect!(self, e => e.load_torque(w, theta))
+    }
+    fn dry_friction(&self, ts: f64, w: f64) -> Option<f64> {
+        on_effect!(self, e => e.dry_friction(ts, w))
+    }
+    fn derivative(&self, i: f64, r: f64, own: &[f64], d_own: &mut [f64]) {
+        on_effect!(self, e => e.derivative(i, r, own, d_own))
+    }
+    fn sensor_state(&self) -> Option<usize> {
+        on_effect!(self, e => e.sensor_state())
+    }
+    fn own_rate(&self, p: &MotorParams) -> f64 {
+        on_effect!(self, e => e.own_rate(p))
+    }
+    fn step_limit(&self, speed: f64) -> f64 {
+        on_effect!(self, e => e.step_limit(speed))
     }
 }
 

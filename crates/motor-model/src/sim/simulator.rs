@@ -24,6 +24,7 @@
 
 use serde::Serialize;
 
+use super::dynamics::Dynamics;
 use super::effects::{Effect, Effects};
 use super::input::Input;
 use crate::derived::signed_damped_pulsation_sq;
@@ -124,7 +125,7 @@ impl Simulator {
         let mut offset = PLANT_STATES;
         let mut sensor = None;
         for effect in effects.list() {
-            let states = effect.dynamics().states();
+            let states = effect.states();
             if offset + states > MAX_STATES {
                 return Err(ModelError::InvalidSetting {
                     name: "states of the effects that are on".into(),
@@ -132,7 +133,7 @@ impl Simulator {
                     expected: "at most MAX_STATES states together with I, Ω and θ",
                 });
             }
-            if let Some(j) = effect.dynamics().sensor_state() {
+            if let Some(j) = effect.sensor_state() {
                 sensor = Some(offset + j);
             }
             active.push(Active {
@@ -145,7 +146,7 @@ impl Simulator {
         let static_friction_nm = active
             .iter()
             .rev()
-            .find_map(|a| a.effect.dynamics().dry_friction(params.ts_nm, 0.0))
+            .find_map(|a| a.effect.dry_friction(params.ts_nm, 0.0))
             .unwrap_or(params.ts_nm);
         let mut sim = Simulator {
             params,
@@ -196,7 +197,7 @@ impl Simulator {
     pub fn with_speed_bound(mut self, speed_rad_s: f64) -> Result<Self, ModelError> {
         let w = positive("speed bound", speed_rad_s)?;
         for a in &self.active {
-            self.max_step_s = self.max_step_s.min(a.effect.dynamics().step_limit(w));
+            self.max_step_s = self.max_step_s.min(a.effect.step_limit(w));
         }
         self.state_dependent_step = false;
         Ok(self)
@@ -259,7 +260,7 @@ impl Simulator {
             let mut h = self.max_step_s;
             if self.state_dependent_step {
                 for a in &self.active {
-                    h = h.min(a.effect.dynamics().step_limit(x[W_IDX]));
+                    h = h.min(a.effect.step_limit(x[W_IDX]));
                 }
             }
             let remaining = t_to - t;
@@ -327,7 +328,7 @@ impl Simulator {
         let load: f64 = self
             .active
             .iter()
-            .map(|a| a.effect.dynamics().load_torque(0.0, x[TH_IDX]))
+            .map(|a| a.effect.load_torque(0.0, x[TH_IDX]))
             .sum();
         self.params.k_nm_per_a * x[I_IDX] - load
     }
@@ -389,7 +390,7 @@ impl Simulator {
         let w = x[W_IDX];
         let (mut r, mut l, mut v_drop) = (p.r_ohm, p.l_henry, 0.0);
         for a in &self.active {
-            let d = a.effect.dynamics();
+            let d = a.effect;
             r *= d.resistance_factor(a.own(x));
             l *= d.inductance_factor(i);
             v_drop += d.voltage_drop(i);
@@ -401,7 +402,7 @@ impl Simulator {
                 let mut coulomb = p.ts_nm;
                 let mut load = 0.0;
                 for a in &self.active {
-                    let d = a.effect.dynamics();
+                    let d = a.effect;
                     load += d.load_torque(w, x[TH_IDX]);
                     if let Some(c) = d.dry_friction(p.ts_nm, w) {
                         coulomb = c;
@@ -416,7 +417,7 @@ impl Simulator {
         dx[I_IDX] = (volts - v_drop - r * i - back_emf) / l;
         for a in &self.active {
             let (own, d_own) = (a.own(x), &mut dx[a.offset..a.offset + a.states]);
-            a.effect.dynamics().derivative(i, r, own, d_own);
+            a.effect.derivative(i, r, own, d_own);
         }
         dx
     }
@@ -433,7 +434,7 @@ impl Simulator {
         // resistance (a brush film).
         let (mut l_min, mut r_extra) = (p.l_henry, 0.0);
         for a in &self.active {
-            let d = a.effect.dynamics();
+            let d = a.effect;
             l_min *= d.min_inductance_factor();
             r_extra += d.incremental_resistance();
             fastest_rate = fastest_rate.max(d.own_rate(p));
