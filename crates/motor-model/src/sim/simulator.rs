@@ -360,18 +360,16 @@ impl Simulator {
         h: f64,
         t_end: f64,
     ) -> State<N> {
-        let volts = |s: f64| {
-            if s >= t_end {
-                self.input.volts_at(t_end.next_down())
-            } else {
-                self.input.volts_at(s)
-            }
-        };
-        let v_mid = volts(t + 0.5 * h);
-        let k1 = self.derivative(x, mode, volts(t));
+        // t and t + h/2 lie before t_end; only the last stage can reach it.
+        let v_mid = self.input.volts_at(t + 0.5 * h);
+        let t4 = t + h;
+        let v_end = self
+            .input
+            .volts_at(if t4 >= t_end { t_end.next_down() } else { t4 });
+        let k1 = self.derivative(x, mode, self.input.volts_at(t));
         let k2 = self.derivative(&axpy(x, 0.5 * h, &k1), mode, v_mid);
         let k3 = self.derivative(&axpy(x, 0.5 * h, &k2), mode, v_mid);
-        let k4 = self.derivative(&axpy(x, h, &k3), mode, volts(t + h));
+        let k4 = self.derivative(&axpy(x, h, &k3), mode, v_end);
         let mut out = *x;
         for (i, o) in out.iter_mut().enumerate() {
             *o += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
