@@ -167,3 +167,61 @@ fn current_sensor_lag_is_fitted_with_the_motor() {
 fn brush_drop_is_fitted_with_the_motor() {
     fit_with("brush_drop:vb=0.5", 43);
 }
+
+/// With the voltage levels and their instants as uncertain inputs (`voltage_levels`: each
+/// change half a period before its first sample, of variance dt²/12), the fit of motor +
+/// effect moves them where the records put them; every interval, widened by what the inputs
+/// leave unknown, holds the truth.
+#[test]
+fn motor_and_effect_with_uncertain_levels() {
+    let truth = servo();
+    let effects = Effects::none().with("quadratic_drag:c=5e-8".parse().unwrap());
+    let recs = records(&truth, effects, 21);
+    let levels: Vec<(Input, Vec<fit::LevelPrior>)> = recs
+        .iter()
+        .map(|r| fit::voltage_levels(&r.t, &r.voltage, None).unwrap())
+        .collect();
+    let excited: Vec<ExcitedRecord> = recs
+        .iter()
+        .zip(&levels)
+        .map(|(r, (input, _))| ExcitedRecord {
+            input,
+            dt: 1.0 / RATE_HZ,
+            current: &r.current,
+            speed: r.speed.as_deref(),
+            position: None,
+            exclude_current: None,
+            exclude_speed: None,
+        })
+        .collect();
+    let priors: Vec<Vec<fit::LevelPrior>> = levels.iter().map(|(_, p)| p.clone()).collect();
+    let start = MotorParams::from_values(truth.values().map(|v| v * 1.2)).unwrap();
+    let start_effects = effects.with_fitted_values(&[6e-8]).unwrap();
+    let fit = fit::identify_output_error_with_inputs_and_effects(
+        &excited,
+        &priors,
+        &start,
+        &start_effects,
+        LmSettings::default(),
+    )
+    .unwrap();
+    assert!(fit.accepted(), "{:?}", fit.failure());
+    let names = fit.parameter_names();
+    let ci = fit.ci95.unwrap();
+    for (k, want) in truth.values().into_iter().enumerate() {
+        let [lo, hi] = ci[k];
+        assert!(
+            lo <= want && want <= hi,
+            "{}: [{lo}, {hi}] vs {want}",
+            names[k]
+        );
+    }
+    let c = &fit.effect_estimates[0];
+    let [lo, hi] = c.ci95.unwrap();
+    assert!(
+        lo <= 5e-8 && 5e-8 <= hi,
+        "{}: {} [{lo}, {hi}]",
+        names[6],
+        c.value
+    );
+}
