@@ -52,6 +52,25 @@ fn records(motor: &MotorParams, effects: Effects, seed: u64) -> Vec<Record> {
         .collect()
 }
 
+/// The fit's view of logged records (current and tachometer) with their inputs.
+fn excited<'a>(
+    recs: &'a [Record],
+    inputs: impl Iterator<Item = &'a Input>,
+) -> Vec<ExcitedRecord<'a>> {
+    recs.iter()
+        .zip(inputs)
+        .map(|(r, input)| ExcitedRecord {
+            input,
+            dt: 1.0 / RATE_HZ,
+            current: &r.current,
+            speed: r.speed.as_deref(),
+            position: None,
+            exclude_current: None,
+            exclude_speed: None,
+        })
+        .collect()
+}
+
 /// Sample-count-weighted mean NRMSE over the channels (SPEC section 7).
 fn nrmse(fit: &FullFit) -> f64 {
     let (sum, n) = fit.fitted.iter().fold((0.0, 0.0), |(s, n), ch| {
@@ -78,19 +97,7 @@ fn fit_with(effect: &str, seed: u64) {
         .iter()
         .map(|r| voltage_input(&r.t, &r.voltage).unwrap())
         .collect();
-    let excited: Vec<ExcitedRecord> = recs
-        .iter()
-        .zip(&inputs)
-        .map(|(r, input)| ExcitedRecord {
-            input,
-            dt: 1.0 / RATE_HZ,
-            current: &r.current,
-            speed: r.speed.as_deref(),
-            position: None,
-            exclude_current: None,
-            exclude_speed: None,
-        })
-        .collect();
+    let excited = excited(&recs, inputs.iter());
     let start = MotorParams::from_values(truth.values().map(|v| v * 1.2)).unwrap();
     let start_effects = effects
         .with_fitted_values(
@@ -181,19 +188,7 @@ fn motor_and_effect_with_uncertain_levels() {
         .iter()
         .map(|r| fit::voltage_levels(&r.t, &r.voltage, None).unwrap())
         .collect();
-    let excited: Vec<ExcitedRecord> = recs
-        .iter()
-        .zip(&levels)
-        .map(|(r, (input, _))| ExcitedRecord {
-            input,
-            dt: 1.0 / RATE_HZ,
-            current: &r.current,
-            speed: r.speed.as_deref(),
-            position: None,
-            exclude_current: None,
-            exclude_speed: None,
-        })
-        .collect();
+    let excited = excited(&recs, levels.iter().map(|(input, _)| input));
     let priors: Vec<Vec<fit::LevelPrior>> = levels.iter().map(|(_, p)| p.clone()).collect();
     let start = MotorParams::from_values(truth.values().map(|v| v * 1.2)).unwrap();
     let start_effects = effects.with_fitted_values(&[6e-8]).unwrap();
