@@ -30,7 +30,7 @@ use crate::mechanical::{identify_inverse_model, InverseModelSettings};
 use crate::parameters::Parameters;
 use crate::plausibility::RecordFacts;
 use crate::signal::Butterworth;
-use crate::stats::NeweyWest;
+use crate::stats::newey_west_score_covariance;
 use crate::step_location::uniform_period;
 
 /// Step of the forward-difference Jacobian in `θ = ln p` (relative step of each parameter).
@@ -461,24 +461,12 @@ impl WeightedProblem for OeProblem {
 
     fn score_covariance(&self, theta: &[f64]) -> Option<DMatrix<f64>> {
         let (r, jac) = self.jacobian(theta)?;
-        let p = jac.ncols();
-        let mut total = DMatrix::zeros(p, p);
-        let mut row = 0;
-        let mut g = vec![0.0; p];
-        for rec in &self.records {
-            for ch in &rec.channels {
-                let mut nw = NeweyWest::new(p, ch.data.len());
-                for _ in 0..ch.data.len() {
-                    for (j, gj) in g.iter_mut().enumerate() {
-                        *gj = r[row] * jac[(row, j)];
-                    }
-                    nw.push(&g);
-                    row += 1;
-                }
-                total += nw.finish()?;
-            }
-        }
-        Some(total)
+        let series: Vec<usize> = self
+            .records
+            .iter()
+            .flat_map(|rec| rec.channels.iter().map(|ch| ch.data.len()))
+            .collect();
+        newey_west_score_covariance(&r, &jac, &series)
     }
 
     fn fitted_channels(&self, theta: &[f64]) -> Vec<FittedChannel> {

@@ -473,14 +473,15 @@ mod tests {
         let r: Vec<f64> = (0..rows).map(|_| next()).collect();
         let jac = DMatrix::from_fn(rows, 3, |_, _| next());
         let whole = newey_west_score_covariance(&r, &jac, &n).unwrap();
-        let mut acc = NeweyWest::<3>::new(n[0]);
+        let mut acc = NeweyWest::new(3, n[0]);
         let mut at = 0;
         for (k, len) in n.iter().enumerate() {
             if k > 0 {
                 acc.new_series(*len);
             }
             for i in at..at + len {
-                acc.push(std::array::from_fn(|j| r[i] * jac[(i, j)]));
+                let g: Vec<f64> = (0..3).map(|j| r[i] * jac[(i, j)]).collect();
+                acc.push(&g);
             }
             at += len;
         }

@@ -1638,14 +1638,14 @@ fn angle_ripple(
     let (order, f, beta) = best?;
     let a = &acc[order - 1];
     let h_inv = normal(a).try_inverse()?;
-    let mut nw = NeweyWest::<3>::new(a[0] as usize);
+    let mut nw = NeweyWest::new(3, a[0] as usize);
     for ((&ri, &th), &st) in r.iter().zip(theta).zip(&step) {
         if !below_nyquist(order, st) {
             continue;
         }
         let (s, c) = (order as f64 * th).sin_cos();
         let e = ri - beta[0] - beta[1] * s - beta[2] * c;
-        nw.push([e, s * e, c * e]);
+        nw.push(&[e, s * e, c * e]);
     }
     let score = nw.finish()?;
     let score = Matrix3::from_iterator(score.iter().copied());
