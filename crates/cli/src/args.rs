@@ -38,6 +38,41 @@ pub enum Command {
     /// The EMPS benchmark (real data): identify the axis, then simulate it in closed loop on the
     /// record with unmodelled force pulses and report where the model disagrees.
     Emps(EmpsArgs),
+    /// Find where the identified model and the records disagree, which unmodelled effect causes
+    /// it, how large it is, and how far the gap shrinks once it is in the model.
+    Diagnose(DiagnoseArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct DiagnoseArgs {
+    /// High-voltage step record (CSV: t, voltage, current and speed or position).
+    #[arg(long, value_name = "HV.csv", requires = "low")]
+    pub high: Option<PathBuf>,
+    /// Low-voltage step record.
+    #[arg(long, value_name = "LV.csv", requires = "high")]
+    pub low: Option<PathBuf>,
+    /// Further training records of any voltage waveform (repeatable).
+    #[arg(long = "record", value_name = "FILE.csv")]
+    pub records: Vec<PathBuf>,
+    /// Records held out whole to judge the candidates on (repeatable; default: blocks of the
+    /// training records are held out).
+    #[arg(long = "validate", value_name = "FILE.csv")]
+    pub validate: Vec<PathBuf>,
+    /// Candidate effects, comma-separated (default: all seven of SPEC section 5).
+    #[arg(long, value_name = "NAME,...", value_delimiter = ',')]
+    pub candidates: Vec<String>,
+    /// Effects named at most, one on top of the other.
+    #[arg(long, default_value_t = 2)]
+    pub max_effects: usize,
+    /// Header names of the record columns, as in `identify`.
+    #[arg(long, value_name = "t=NAME,voltage=NAME,...")]
+    pub columns: Option<String>,
+    /// Print one JSON object instead of the report.
+    #[arg(long)]
+    pub json: bool,
+    /// No progress on standard error.
+    #[arg(long)]
+    pub quiet: bool,
 }
 
 #[derive(Debug, Args)]

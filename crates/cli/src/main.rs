@@ -107,7 +107,8 @@ fn declared_outputs(command: &Command) -> Vec<output::Declared> {
                 }
             }
         }
-        Command::Model(_) | Command::Montecarlo(_) | Command::Emulate(_) => {}
+        Command::Model(_) | Command::Montecarlo(_) | Command::Emulate(_) | Command::Diagnose(_) => {
+        }
     }
     outputs
 }
@@ -125,6 +126,7 @@ fn main() -> ExitCode {
         Command::Emulate(a) => commands::emulate::run(&a),
         Command::Acquire(a) => commands::acquire::run(&a),
         Command::Emps(a) => commands::emps::run(&a),
+        Command::Diagnose(a) => commands::diagnose::run(&a),
     });
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

@@ -493,6 +493,41 @@ impl WeightedProblem for OeProblem {
     }
 }
 
+/// The model's channels on every sample of `records` — the samples an exclusion mask leaves out
+/// of a fit too — for `motor` with `effects`: what a fit is judged against on data it did not
+/// see (held-out records or blocks). Channels as in [`identify_output_error`]; each
+/// [`FittedChannel::samples`] lists every sample.
+pub fn predict_output_error(
+    records: &[ExcitedRecord<'_>],
+    motor: &MotorParams,
+    effects: &Effects,
+) -> Result<Vec<FittedChannel>, FitError> {
+    let all: Vec<ExcitedRecord<'_>> = records
+        .iter()
+        .map(|r| ExcitedRecord {
+            exclude_current: None,
+            exclude_speed: None,
+            ..*r
+        })
+        .collect();
+    let problem = OeProblem::new(&all, effects, f64::INFINITY)?;
+    problem.set_step_for(motor, effects).ok_or_else(|| {
+        bad(
+            "motor",
+            "a time constant far below the sample period: the records cannot show it".into(),
+        )
+    })?;
+    let theta = problem.parameters.encode(motor, effects)?;
+    let fitted = problem.fitted_channels(&theta);
+    if fitted.is_empty() {
+        return Err(bad(
+            "motor",
+            "the model cannot be simulated on these records".into(),
+        ));
+    }
+    Ok(fitted)
+}
+
 /// Checks record `k` (0-based): aligned, finite channels of enough samples, a positive period.
 fn check_record(k: usize, rec: &ExcitedRecord<'_>) -> Result<(), FitError> {
     let label = format!("record {}", k + 1);

@@ -1,5 +1,6 @@
 pub mod acquire;
 pub mod demo;
+pub mod diagnose;
 pub mod emps;
 pub mod emulate;
 pub mod fleet;

@@ -10,6 +10,9 @@
 //!   the windows of largest excess), in operating region (speed and current bands, trends), in
 //!   frequency and shaft angle, with the whiteness and input cross-correlation of MATLAB's
 //!   `resid`. Each part carries a test that separates a real gap from noise.
+//! - [`diagnose`] ([`run`]): the whole diagnosis — the nominal fit, the localisation, every
+//!   candidate refitted with the motor on training data and judged on held-out data, stage
+//!   after stage.
 //! - [`verdict`]: *which* — candidate effects ranked by their held-out improvement, each with a
 //!   paired test against the noise, `none` when nothing is significant, an ambiguous verdict
 //!   when the best two cannot be told apart.
@@ -18,4 +21,10 @@
 //! values (serialisable with `serde`).
 
 pub mod localise;
+pub mod run;
 pub mod verdict;
+
+pub use run::{
+    diagnose, CandidateReport, DiagnoseError, DiagnoseProgress, DiagnoseSettings, Diagnosis,
+    EffectParam, ParamShift, Stage,
+};

@@ -1,0 +1,124 @@
+//! `motorid diagnose` end to end: a simulated servo with a withheld effect is diagnosed as that
+//! effect with its size inside its interval; the nominal servo as `none`; bad input is refused
+//! with exit 2.
+
+mod common;
+
+use common::{assert_bad_input, motorid, scratch, simulate_to, stderr, stdout};
+
+/// A high and a low step of the small servo through a 10-bit logger and a 2000-count encoder,
+/// with `effect` (if any) in the plant.
+fn steps(dir: &std::path::Path, effect: Option<&str>) -> (String, String) {
+    let mut paths = Vec::new();
+    for (volts, seed) in [("12", "1"), ("3", "2")] {
+        let path = dir.join(format!("s{volts}.csv"));
+        let mut args = vec![
+            "--motor",
+            "../../fixtures/motors/small_servo.json",
+            "--voltage",
+            volts,
+            "--duration",
+            "0.6",
+            "--rate",
+            "5000",
+            "--adc-bits",
+            "10",
+            "--noise-lsb",
+            "1",
+            "--encoder-cpr",
+            "2000",
+            "--speed-from",
+            "encoder",
+            "--seed",
+            seed,
+            "--quiet",
+        ];
+        if let Some(e) = effect {
+            args.extend(["--effect", e]);
+        }
+        simulate_to(&path, &args);
+        paths.push(path.to_str().unwrap().to_string());
+    }
+    (paths[0].clone(), paths[1].clone())
+}
+
+fn diagnose_json(high: &str, low: &str) -> serde_json::Value {
+    let out = motorid(&[
+        "diagnose",
+        "--high",
+        high,
+        "--low",
+        low,
+        "--candidates",
+        "quadratic_drag,cogging_torque",
+        "--max-effects",
+        "1",
+        "--json",
+        "--quiet",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    serde_json::from_str(&stdout(&out)).expect("one JSON object")
+}
+
+#[test]
+fn a_withheld_quadratic_drag_is_named_with_its_size() {
+    let dir = scratch("diagnose_drag");
+    let (high, low) = steps(&dir, Some("quadratic_drag:c=2e-7"));
+    let report = diagnose_json(&high, &low);
+    assert_eq!(report["verdict"], "quadratic_drag", "{report:#}");
+    let drag = report["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["name"] == "quadratic_drag")
+        .unwrap();
+    assert_eq!(drag["significant"], true);
+    let c = &drag["params"][0];
+    assert_eq!(c["unit"], "N·m·s²/rad²");
+    let (lo, hi) = (
+        c["ci95"][0].as_f64().unwrap(),
+        c["ci95"][1].as_f64().unwrap(),
+    );
+    assert!(lo <= 2e-7 && 2e-7 <= hi, "c = {} [{lo}, {hi}]", c["value"]);
+    assert!(
+        drag["heldout_nrmse_after"].as_f64().unwrap()
+            < drag["heldout_nrmse_before"].as_f64().unwrap()
+    );
+    assert!(report["where"]["records"].as_array().unwrap().len() == 2);
+}
+
+#[test]
+fn the_nominal_servo_is_diagnosed_as_none() {
+    let dir = scratch("diagnose_none");
+    let (high, low) = steps(&dir, None);
+    let report = diagnose_json(&high, &low);
+    assert_eq!(report["verdict"], "none", "{report:#}");
+    assert!(report["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .all(|e| e["significant"] == false));
+}
+
+#[test]
+fn bad_input_is_refused_naming_the_file() {
+    assert_bad_input(&["diagnose"], "diagnose needs records");
+    assert_bad_input(
+        &["diagnose", "--record", "/nonexistent/r.csv"],
+        "/nonexistent/r.csv",
+    );
+    let dir = scratch("diagnose_bad");
+    let (high, low) = steps(&dir, None);
+    assert_bad_input(
+        &[
+            "diagnose",
+            "--high",
+            &high,
+            "--low",
+            &low,
+            "--candidates",
+            "wind",
+        ],
+        "unknown effect `wind`",
+    );
+}

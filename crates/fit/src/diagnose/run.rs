@@ -1,0 +1,834 @@
+//! The whole diagnosis: the nominal identification, where its residual stands above the noise,
+//! each candidate effect refitted jointly with the motor by output error, the candidates ranked
+//! on held-out data, and the same again on top of the chosen effect (a second effect present is
+//! named too).
+//!
+//! **Held-out data.** Records given as validation are held out whole. Without them every
+//! training record is cut into blocks of [`DiagnoseSettings::block_samples`] samples and every
+//! [`DiagnoseSettings::holdout_every`]-th block is left out of every fit (its samples excluded,
+//! as clipped samples are) and judged on the model's prediction there. A physical effect of a
+//! few parameters cannot learn the noise of the blocks it does not see, so a fall of the
+//! held-out error is evidence; a fall on the training blocks alone is not (SPEC section 7).
+//!
+//! **Candidates** start from the nominal motor and a small size of each effect, its shape
+//! parameters from the records (the cogging period count from the residual's ripple per
+//! revolution, time constants from the record span and sample period, speeds and currents from
+//! their peaks). A candidate whose refit leaves its size undetermined (no interval, or an
+//! interval wider than a hundred times its value) is *not testable from these records* rather
+//! than absent.
+
+use motor_model::{
+    BrushDrop, CoggingTorque, CurrentSensorLag, Effect, EffectKind, Effects, InductanceSaturation,
+    MotorParams, QuadraticDrag, StribeckFriction, ThermalDrift, COPPER_ALPHA_PER_K,
+};
+use serde::Serialize;
+
+use crate::diagnose::localise::{
+    localise, Localisation, LocaliseSettings, ResidualChannel, ResidualRecord,
+};
+use crate::diagnose::verdict::{rank_candidates, CandidateScore, Verdict, VerdictSettings};
+use crate::error::FitError;
+use crate::full_model::{Channel, FittedChannel, FullFit, PARAM_NAMES};
+use crate::lm::LmSettings;
+use crate::output_error::{
+    identify_output_error_with_effects, predict_output_error, ExcitedRecord,
+};
+use crate::parameters::EffectEstimate;
+
+/// Settings of [`diagnose`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct DiagnoseSettings {
+    /// The candidate effects (default: all seven of SPEC section 5).
+    pub candidates: Vec<EffectKind>,
+    /// Effects named at most, one after the other (default 2).
+    pub max_effects: usize,
+    /// Block length of the split into training and held-out data \[samples\] (default 50).
+    pub block_samples: usize,
+    /// Every this many blocks one is held out (default 4: a quarter).
+    pub holdout_every: usize,
+    /// The ranking's settings.
+    pub verdict: VerdictSettings,
+    /// The localisation's settings.
+    pub localise: LocaliseSettings,
+    /// The solver's settings for every fit.
+    pub lm: LmSettings,
+    /// Candidates refitted at the same time (default: the machine's parallelism).
+    pub threads: usize,
+}
+
+impl Default for DiagnoseSettings {
+    fn default() -> Self {
+        DiagnoseSettings {
+            candidates: EffectKind::ALL.to_vec(),
+            max_effects: 2,
+            block_samples: 50,
+            holdout_every: 4,
+            verdict: VerdictSettings::default(),
+            localise: LocaliseSettings::default(),
+            lm: LmSettings::default(),
+            threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+        }
+    }
+}
+
+/// Where a diagnosis stands, for progress reports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DiagnoseProgress {
+    /// The nominal model is being fitted.
+    Nominal,
+    /// Stage `stage` (1 for the first effect): `done` of `total` candidates refitted.
+    Candidates {
+        /// Which effect is being looked for (1 = first).
+        stage: usize,
+        /// Candidates done.
+        done: usize,
+        /// Candidates in this stage.
+        total: usize,
+    },
+}
+
+/// How one motor parameter moved when an effect was added.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ParamShift {
+    /// R, L, k, f, J or Ts.
+    pub name: &'static str,
+    /// Before (SI units).
+    pub before: f64,
+    /// After (SI units).
+    pub after: f64,
+    /// `after / before − 1`.
+    pub relative: f64,
+}
+
+/// One fitted effect parameter, for reports.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EffectParam {
+    /// Its symbol (e.g. `Tst`).
+    pub symbol: &'static str,
+    /// Its key in the effect's table (e.g. `tst`).
+    pub key: &'static str,
+    /// Its SI unit.
+    pub unit: &'static str,
+    /// The fitted value.
+    pub value: f64,
+    /// Its 95 % interval, if computed.
+    pub ci95: Option<[f64; 2]>,
+}
+
+/// One candidate effect refitted with the motor.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CandidateReport {
+    /// The effect's name.
+    pub name: &'static str,
+    /// Whether the records determine its size (module docs).
+    pub testable: bool,
+    /// Whether its held-out improvement is significant (see [`Verdict`]).
+    pub significant: bool,
+    /// p-value of its training likelihood-ratio test (see [`crate::diagnose::verdict`]).
+    pub p_value: f64,
+    /// One-sided p-value of its held-out improvement.
+    pub heldout_p_value: f64,
+    /// Its fitted parameters.
+    pub params: Vec<EffectParam>,
+    /// Training NRMSE (SPEC section 7, summary over channels) before and after.
+    pub train_nrmse_before: f64,
+    /// See `train_nrmse_before`.
+    pub train_nrmse_after: f64,
+    /// Held-out NRMSE before and after.
+    pub heldout_nrmse_before: f64,
+    /// See `heldout_nrmse_before`.
+    pub heldout_nrmse_after: f64,
+    /// How each motor parameter moved.
+    pub motor_shift: Vec<ParamShift>,
+    /// The motor after the refit.
+    #[serde(skip)]
+    pub motor: Option<MotorParams>,
+    /// The effects after the refit (those found before, and this one).
+    #[serde(skip)]
+    pub effects: Effects,
+    /// Why the refit failed, if it did.
+    pub failure: Option<String>,
+}
+
+/// One stage of the search: the candidates on top of the effects found so far, and its verdict.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Stage {
+    /// Effects already in the model at this stage (names).
+    pub base: Vec<&'static str>,
+    /// The candidates, in the order of [`DiagnoseSettings::candidates`].
+    pub candidates: Vec<CandidateReport>,
+    /// Their ranking and the verdict.
+    pub verdict: Verdict,
+}
+
+/// A diagnosis (module docs).
+#[derive(Debug, Clone)]
+pub struct Diagnosis {
+    /// The nominal identification on the training data.
+    pub nominal: FullFit,
+    /// Why the nominal fit alone would not be a result, when the diagnosis went on anyway (a
+    /// channel explained worse than by its mean: what a large unmodelled effect does).
+    pub nominal_note: Option<String>,
+    /// How the held-out data were made, in words.
+    pub heldout: String,
+    /// Where the nominal model's residual stands above the noise, on every record.
+    pub localisation: Localisation,
+    /// The stages of the search (the first looks for one effect; a second, on top of the
+    /// first's verdict, for another).
+    pub stages: Vec<Stage>,
+}
+
+impl Diagnosis {
+    /// The effects named, in the order found (empty: `none`).
+    pub fn named(&self) -> Vec<&str> {
+        self.stages
+            .iter()
+            .filter_map(|s| s.verdict.verdict.as_deref())
+            .collect()
+    }
+}
+
+/// Why a diagnosis could not be made.
+#[derive(Debug)]
+#[non_exhaustive]
+pub enum DiagnoseError {
+    /// The records or settings are unusable.
+    Fit(FitError),
+    /// The nominal identification is not a result: no effect is named on top of it.
+    NominalFailed(String),
+}
+
+impl std::fmt::Display for DiagnoseError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            DiagnoseError::Fit(e) => write!(f, "{e}"),
+            DiagnoseError::NominalFailed(why) => write!(
+                f,
+                "the nominal identification failed ({why}): no effect can be named on top of it"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for DiagnoseError {}
+
+impl From<FitError> for DiagnoseError {
+    fn from(e: FitError) -> Self {
+        DiagnoseError::Fit(e)
+    }
+}
+
+/// The records with the held-out blocks excluded (owned masks).
+struct Split {
+    current_masks: Vec<Vec<bool>>,
+    speed_masks: Vec<Vec<bool>>,
+    /// Per record, whether each sample is held out.
+    held: Vec<Vec<bool>>,
+}
+
+fn split(records: &[ExcitedRecord<'_>], settings: &DiagnoseSettings) -> Split {
+    let block = settings.block_samples.max(1);
+    let every = settings.holdout_every.max(2);
+    let mut out = Split {
+        current_masks: Vec::new(),
+        speed_masks: Vec::new(),
+        held: Vec::new(),
+    };
+    for r in records {
+        let n = r.current.len();
+        let held: Vec<bool> = (0..n).map(|i| (i / block) % every == every - 1).collect();
+        let merge = |m: Option<&[bool]>| -> Vec<bool> {
+            (0..n).map(|i| held[i] || m.is_some_and(|m| m[i])).collect()
+        };
+        out.current_masks.push(merge(r.exclude_current));
+        out.speed_masks.push(merge(r.exclude_speed));
+        out.held.push(held);
+    }
+    out
+}
+
+/// NRMSE summary over channels (SPEC section 7: each channel's, weighted by sample count) of
+/// the samples `keep` selects.
+fn nrmse_summary(channels: &[FittedChannel], keep: impl Fn(&FittedChannel, usize) -> bool) -> f64 {
+    let (mut weighted, mut count) = (0.0, 0usize);
+    for ch in channels {
+        let idx: Vec<usize> = (0..ch.samples.len())
+            .filter(|&j| keep(ch, ch.samples[j]))
+            .collect();
+        if idx.len() < 2 {
+            continue;
+        }
+        let mean = idx.iter().map(|&j| ch.measured[j]).sum::<f64>() / idx.len() as f64;
+        let sst: f64 = idx.iter().map(|&j| (ch.measured[j] - mean).powi(2)).sum();
+        let sse: f64 = idx
+            .iter()
+            .map(|&j| (ch.measured[j] - ch.model[j]).powi(2))
+            .sum();
+        if sst > 0.0 {
+            weighted += (sse / sst).sqrt() * idx.len() as f64;
+            count += idx.len();
+        }
+    }
+    if count == 0 {
+        f64::NAN
+    } else {
+        weighted / count as f64
+    }
+}
+
+/// Held-out squared errors per block, each channel's residual over its noise level `sigma`.
+fn block_sse(
+    channels: &[FittedChannel],
+    sigmas: &[(usize, Channel, f64)],
+    held: &[Vec<bool>],
+    block: usize,
+) -> Vec<f64> {
+    use std::collections::BTreeMap;
+    let mut sums: BTreeMap<(usize, usize), f64> = BTreeMap::new();
+    for ch in channels {
+        let sigma = sigmas
+            .iter()
+            .find(|(r, c, _)| *r == ch.record && *c == ch.channel)
+            .map_or(1.0, |s| s.2);
+        for (j, &i) in ch.samples.iter().enumerate() {
+            if held.get(ch.record).is_some_and(|h| h[i]) {
+                *sums.entry((ch.record, i / block)).or_default() +=
+                    ((ch.measured[j] - ch.model[j]) / sigma).powi(2);
+            }
+        }
+    }
+    sums.into_values().collect()
+}
+
+/// Lags of the residual autocorrelation behind the correlation factor.
+const CORRELATION_LAGS: usize = 25;
+
+/// The training likelihood-ratio statistic of a refit (see [`crate::diagnose::verdict`]): the
+/// fall of the weighted squared error over the training samples from `before` to `after`,
+/// divided by the sample-weighted correlation factor `1 + 2 Σ ρₖ²` of the residuals after.
+fn train_statistic(
+    before: &[FittedChannel],
+    after: &[FittedChannel],
+    sigmas: &[(usize, Channel, f64)],
+    held: &[Vec<bool>],
+) -> Option<f64> {
+    let (mut fall, mut factor_sum, mut count) = (0.0, 0.0, 0usize);
+    for a in after {
+        let b = before
+            .iter()
+            .find(|b| b.record == a.record && b.channel == a.channel)?;
+        let sigma = sigmas
+            .iter()
+            .find(|(r, c, _)| *r == a.record && *c == a.channel)
+            .map_or(1.0, |s| s.2);
+        let train: Vec<usize> = (0..a.samples.len())
+            .filter(|&j| !held.get(a.record).is_some_and(|h| h[a.samples[j]]))
+            .collect();
+        if train.len() <= CORRELATION_LAGS + 1 || b.model.len() != a.model.len() {
+            continue;
+        }
+        let e: Vec<f64> = train
+            .iter()
+            .map(|&j| (a.measured[j] - a.model[j]) / sigma)
+            .collect();
+        let sse_after: f64 = e.iter().map(|v| v * v).sum();
+        let sse_before: f64 = train
+            .iter()
+            .map(|&j| ((b.measured[j] - b.model[j]) / sigma).powi(2))
+            .sum();
+        let mean = e.iter().sum::<f64>() / e.len() as f64;
+        let var: f64 = e.iter().map(|v| (v - mean).powi(2)).sum();
+        let factor = if var > 0.0 {
+            1.0 + 2.0
+                * (1..=CORRELATION_LAGS)
+                    .map(|k| {
+                        let c: f64 = (k..e.len())
+                            .map(|i| (e[i] - mean) * (e[i - k] - mean))
+                            .sum();
+                        (c / var).powi(2)
+                    })
+                    .sum::<f64>()
+        } else {
+            1.0
+        };
+        fall += sse_before - sse_after;
+        factor_sum += factor * e.len() as f64;
+        count += e.len();
+    }
+    (count > 0).then(|| fall / (factor_sum / count as f64))
+}
+
+/// A small starting size of `kind` on `motor`, its shape from the records.
+fn candidate_start(
+    kind: EffectKind,
+    motor: &MotorParams,
+    records: &[ExcitedRecord<'_>],
+    localisation: &Localisation,
+) -> Effect {
+    let peak = |f: &dyn Fn(&ExcitedRecord<'_>) -> Option<f64>| {
+        records.iter().filter_map(f).fold(0.0_f64, f64::max)
+    };
+    let w_max = peak(&|r| {
+        r.speed
+            .map(|s| s.iter().fold(0.0_f64, |m, v| m.max(v.abs())))
+            .or_else(|| {
+                r.position.map(|p| {
+                    p.windows(2)
+                        .map(|w| ((w[1] - w[0]) / r.dt).abs())
+                        .fold(0.0_f64, f64::max)
+                })
+            })
+    })
+    .max(1e-3);
+    let i_max = peak(&|r| Some(r.current.iter().fold(0.0_f64, |m, v| m.max(v.abs())))).max(1e-6);
+    let dt = records.iter().map(|r| r.dt).fold(f64::INFINITY, f64::min);
+    let span = peak(&|r| Some(r.current.len() as f64 * r.dt));
+    match kind {
+        EffectKind::StribeckFriction => Effect::StribeckFriction(StribeckFriction {
+            static_torque_nm: 1.5 * motor.ts_nm,
+            stribeck_speed_rad_s: 0.05 * w_max,
+        }),
+        EffectKind::CoggingTorque => {
+            let n = localisation
+                .records
+                .iter()
+                .flat_map(|r| &r.channels)
+                .filter_map(|c| c.angle_ripple.as_ref())
+                .min_by(|a, b| a.p_value.total_cmp(&b.p_value))
+                .map_or(6, |a| a.periods_per_rev.max(1));
+            Effect::CoggingTorque(CoggingTorque {
+                amplitude_nm: 0.1 * motor.ts_nm.max(1e-3 * motor.k_nm_per_a * i_max),
+                periods_per_rev: n,
+                phase_rad: 0.3,
+            })
+        }
+        EffectKind::CurrentSensorLag => {
+            Effect::CurrentSensorLag(CurrentSensorLag { tau_f_s: 0.5 * dt })
+        }
+        EffectKind::ThermalDrift => {
+            // A rise of a few kelvin over the records' span at their mean copper loss.
+            let loss = records
+                .iter()
+                .map(|r| {
+                    r.current.iter().map(|i| i * i).sum::<f64>() / r.current.len().max(1) as f64
+                })
+                .fold(0.0_f64, f64::max)
+                * motor.r_ohm;
+            let rth = 5.0 / loss.max(1e-9);
+            Effect::ThermalDrift(ThermalDrift {
+                thermal_resistance_k_per_w: rth,
+                thermal_capacity_j_per_k: span.max(dt) / rth,
+                alpha_per_k: COPPER_ALPHA_PER_K,
+            })
+        }
+        EffectKind::QuadraticDrag => Effect::QuadraticDrag(QuadraticDrag {
+            c_nms2_per_rad2: 0.1 * motor.f_nms_per_rad / w_max,
+        }),
+        EffectKind::BrushDrop => Effect::BrushDrop(BrushDrop {
+            drop_v: 0.02 * motor.r_ohm * i_max,
+            knee_current_a: 0.05 * i_max,
+        }),
+        EffectKind::InductanceSaturation => Effect::InductanceSaturation(InductanceSaturation {
+            saturation_current_a: 2.0 * i_max,
+            min_ratio: 0.5,
+        }),
+    }
+}
+
+/// Whether a refit determines the effect's size: every fitted parameter has an interval no
+/// wider than a hundred times its value.
+fn determined(estimates: &[EffectEstimate]) -> bool {
+    !estimates.is_empty()
+        && estimates.iter().all(|e| {
+            e.ci95
+                .is_some_and(|[lo, hi]| (hi - lo).is_finite() && hi - lo <= 100.0 * e.value.abs())
+        })
+}
+
+/// Everything one stage needs about the model it starts from.
+struct Base<'a> {
+    motor: MotorParams,
+    effects: Effects,
+    train_fitted: Vec<FittedChannel>,
+    heldout_fitted: Vec<FittedChannel>,
+    train: &'a [ExcitedRecord<'a>],
+    all: &'a [ExcitedRecord<'a>],
+}
+
+/// Identifies the motor on `records`, localises its residual and looks for the unmodelled
+/// effects among [`DiagnoseSettings::candidates`] (module docs). `validation` records, if any,
+/// are held out whole; otherwise blocks of `records` are. `start` is the start of the nominal
+/// fit (e.g. [`crate::equation_error_start`]). `names` label the records in the localisation
+/// (training first, then validation). `progress` is called as the work advances.
+pub fn diagnose(
+    records: &[ExcitedRecord<'_>],
+    validation: &[ExcitedRecord<'_>],
+    names: &[&str],
+    start: &MotorParams,
+    settings: &DiagnoseSettings,
+    progress: &(dyn Fn(DiagnoseProgress) + Sync),
+) -> Result<Diagnosis, DiagnoseError> {
+    if records.is_empty() {
+        return Err(FitError::BadData {
+            series: "records".into(),
+            reason: "no record given".into(),
+        }
+        .into());
+    }
+    // The training records: whole, or with their held-out blocks excluded.
+    let masks = validation.is_empty().then(|| split(records, settings));
+    let train: Vec<ExcitedRecord<'_>> = match &masks {
+        Some(m) => records
+            .iter()
+            .enumerate()
+            .map(|(k, r)| ExcitedRecord {
+                exclude_current: Some(&m.current_masks[k]),
+                exclude_speed: Some(&m.speed_masks[k]),
+                ..*r
+            })
+            .collect(),
+        None => records.to_vec(),
+    };
+    // Every record the held-out error is judged on, and which samples of each are held out.
+    let all: Vec<ExcitedRecord<'_>> = records.iter().chain(validation).copied().collect();
+    let held: Vec<Vec<bool>> = match &masks {
+        Some(m) => m.held.clone(),
+        None => records
+            .iter()
+            .map(|r| vec![false; r.current.len()])
+            .chain(validation.iter().map(|r| vec![true; r.current.len()]))
+            .collect(),
+    };
+    let heldout = match &masks {
+        Some(_) => format!(
+            "no validation record: every {}th block of {} samples of each record held out ({} %)",
+            settings.holdout_every.max(2),
+            settings.block_samples.max(1),
+            100 / settings.holdout_every.max(2)
+        ),
+        None => format!("{} validation record(s) held out whole", validation.len()),
+    };
+
+    progress(DiagnoseProgress::Nominal);
+    let nominal = identify_output_error_with_effects(&train, start, &Effects::none(), settings.lm)?;
+    // A channel the nominal model explains worse than its mean is what an unmodelled effect
+    // can do: diagnosed, and said (`nominal_note`). Any other failure stops here.
+    let nominal_note = match (&nominal.refusal, nominal.failure()) {
+        (_, None) => None,
+        (Some(r @ crate::Refusal::WorseThanConstant { .. }), Some(_))
+            if nominal.termination.converged() =>
+        {
+            Some(r.to_string())
+        }
+        (_, Some(why)) => return Err(DiagnoseError::NominalFailed(why)),
+    };
+    let nominal_all = predict_output_error(&all, &nominal.params, &Effects::none())?;
+    // The noise level of each channel, as the nominal fit weighted it: the same for every
+    // candidate, so that their held-out errors compare.
+    let sigmas: Vec<(usize, Channel, f64)> = nominal
+        .quality
+        .iter()
+        .map(|q| (q.test, q.channel, q.noise_std))
+        .collect();
+    let localisation = localise_all(&all, &nominal_all, names, &settings.localise)?;
+
+    let mut stages: Vec<Stage> = Vec::new();
+    let mut base = Base {
+        motor: nominal.params,
+        effects: Effects::none(),
+        train_fitted: nominal_all.clone(),
+        heldout_fitted: nominal_all,
+        train: &train,
+        all: &all,
+    };
+    for stage_no in 1..=settings.max_effects.max(1) {
+        let kinds: Vec<EffectKind> = settings
+            .candidates
+            .iter()
+            .copied()
+            .filter(|k| base.effects.get(*k).is_none())
+            .collect();
+        if kinds.is_empty() {
+            break;
+        }
+        let stage = run_stage(
+            stage_no,
+            &kinds,
+            &base,
+            &held,
+            &sigmas,
+            &localisation,
+            settings,
+            progress,
+        );
+        let chosen = stage.verdict.verdict.clone();
+        let next = chosen.as_ref().and_then(|name| {
+            stage
+                .candidates
+                .iter()
+                .find(|c| c.name == name.as_str())
+                .and_then(|c| c.motor.map(|m| (m, c.effects)))
+        });
+        stages.push(stage);
+        let Some((motor, effects)) = next else {
+            break;
+        };
+        // The next stage starts from the model with the chosen effect.
+        let fitted = predict_output_error(&all, &motor, &effects)?;
+        base = Base {
+            motor,
+            effects,
+            train_fitted: fitted.clone(),
+            heldout_fitted: fitted,
+            train: &train,
+            all: &all,
+        };
+    }
+    Ok(Diagnosis {
+        nominal,
+        nominal_note,
+        heldout,
+        localisation,
+        stages,
+    })
+}
+
+/// The localisation of the nominal model on every record.
+fn localise_all(
+    all: &[ExcitedRecord<'_>],
+    fitted: &[FittedChannel],
+    names: &[&str],
+    settings: &LocaliseSettings,
+) -> Result<Localisation, FitError> {
+    let voltages: Vec<Vec<f64>> = all
+        .iter()
+        .map(|r| {
+            (0..r.current.len())
+                .map(|i| r.input.volts_at(i as f64 * r.dt))
+                .collect()
+        })
+        .collect();
+    let speeds: Vec<Option<Vec<f64>>> = all
+        .iter()
+        .map(|r| {
+            r.speed.map(<[f64]>::to_vec).or_else(|| {
+                r.position.map(|p| {
+                    let t: Vec<f64> = (0..p.len()).map(|i| i as f64 * r.dt).collect();
+                    motor_model::central_difference(&t, p)
+                })
+            })
+        })
+        .collect();
+    let fallback: Vec<String> = (0..all.len())
+        .map(|k| format!("record {}", k + 1))
+        .collect();
+    let records: Vec<ResidualRecord<'_>> = all
+        .iter()
+        .enumerate()
+        .map(|(k, r)| ResidualRecord {
+            name: names.get(k).copied().unwrap_or(fallback[k].as_str()),
+            dt: r.dt,
+            voltage: &voltages[k],
+            current: Some(r.current),
+            speed: speeds[k].as_deref(),
+            angle: r.position,
+            channels: fitted
+                .iter()
+                .filter(|c| c.record == k && c.samples.len() == r.current.len())
+                .map(|c| ResidualChannel {
+                    kind: c.channel,
+                    measured: &c.measured,
+                    model: &c.model,
+                })
+                .collect(),
+        })
+        .collect();
+    localise(&records, settings)
+}
+
+/// One stage: every candidate refitted on top of `base` (in parallel), then ranked.
+#[allow(clippy::too_many_arguments)]
+fn run_stage(
+    stage_no: usize,
+    kinds: &[EffectKind],
+    base: &Base<'_>,
+    held: &[Vec<bool>],
+    sigmas: &[(usize, Channel, f64)],
+    localisation: &Localisation,
+    settings: &DiagnoseSettings,
+    progress: &(dyn Fn(DiagnoseProgress) + Sync),
+) -> Stage {
+    let block = settings.block_samples.max(1);
+    let train_mask = |ch: &FittedChannel, i: usize| !held.get(ch.record).is_some_and(|h| h[i]);
+    let held_mask = |ch: &FittedChannel, i: usize| held.get(ch.record).is_some_and(|h| h[i]);
+    let train_before = nrmse_summary(&base.train_fitted, train_mask);
+    let heldout_before = nrmse_summary(&base.heldout_fitted, held_mask);
+    let sse_before = block_sse(&base.heldout_fitted, sigmas, held, block);
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    progress(DiagnoseProgress::Candidates {
+        stage: stage_no,
+        done: 0,
+        total: kinds.len(),
+    });
+    let refit = |kind: EffectKind| -> (CandidateReport, Vec<f64>, Option<f64>) {
+        let effect = candidate_start(kind, &base.motor, base.train, localisation);
+        let effects = base.effects.with(effect);
+        let outcome =
+            identify_output_error_with_effects(base.train, &base.motor, &effects, settings.lm)
+                .map_err(|e| e.to_string())
+                .and_then(|fit| match fit.failure() {
+                    Some(why) => Err(why),
+                    None => Ok(fit),
+                })
+                .and_then(|fit| {
+                    predict_output_error(base.all, &fit.params, &fit.effects)
+                        .map(|pred| (fit, pred))
+                        .map_err(|e| e.to_string())
+                });
+        let report = match outcome {
+            Ok((fit, pred)) => {
+                let own: Vec<EffectEstimate> = fit
+                    .effect_estimates
+                    .iter()
+                    .filter(|e| e.effect == kind)
+                    .cloned()
+                    .collect();
+                let sse = block_sse(&pred, sigmas, held, block);
+                let statistic = train_statistic(&base.train_fitted, &pred, sigmas, held);
+                let motor_shift = PARAM_NAMES
+                    .iter()
+                    .zip(base.motor.values())
+                    .zip(fit.params.values())
+                    .map(|((name, b), a)| ParamShift {
+                        name,
+                        before: b,
+                        after: a,
+                        relative: a / b - 1.0,
+                    })
+                    .collect();
+                (
+                    CandidateReport {
+                        name: kind.name(),
+                        testable: determined(&own),
+                        significant: false,
+                        p_value: 1.0,
+                        heldout_p_value: 1.0,
+                        params: own
+                            .iter()
+                            .map(|e| EffectParam {
+                                symbol: e.symbol,
+                                key: e.key,
+                                unit: e.unit,
+                                value: e.value,
+                                ci95: e.ci95,
+                            })
+                            .collect(),
+                        train_nrmse_before: train_before,
+                        train_nrmse_after: nrmse_summary(&pred, train_mask),
+                        heldout_nrmse_before: heldout_before,
+                        heldout_nrmse_after: nrmse_summary(&pred, held_mask),
+                        motor_shift,
+                        motor: Some(fit.params),
+                        effects: fit.effects,
+                        failure: None,
+                    },
+                    sse,
+                    statistic,
+                )
+            }
+            Err(why) => (
+                CandidateReport {
+                    name: kind.name(),
+                    testable: false,
+                    significant: false,
+                    p_value: 1.0,
+                    heldout_p_value: 1.0,
+                    params: Vec::new(),
+                    train_nrmse_before: train_before,
+                    train_nrmse_after: f64::NAN,
+                    heldout_nrmse_before: heldout_before,
+                    heldout_nrmse_after: f64::NAN,
+                    motor_shift: Vec::new(),
+                    motor: None,
+                    effects,
+                    failure: Some(why),
+                },
+                Vec::new(),
+                None,
+            ),
+        };
+        let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        progress(DiagnoseProgress::Candidates {
+            stage: stage_no,
+            done: d,
+            total: kinds.len(),
+        });
+        report
+    };
+    // Candidates in parallel, at most `threads` at a time.
+    let threads = settings.threads.max(1);
+    let mut results: Vec<(CandidateReport, Vec<f64>, Option<f64>)> =
+        Vec::with_capacity(kinds.len());
+    for chunk in kinds.chunks(threads) {
+        let part: Vec<(CandidateReport, Vec<f64>, Option<f64>)> = std::thread::scope(|scope| {
+            let handles: Vec<_> = chunk
+                .iter()
+                .map(|&k| scope.spawn(move || refit(k)))
+                .collect();
+            handles
+                .into_iter()
+                .zip(chunk)
+                .map(|(h, &k)| {
+                    h.join().unwrap_or_else(|_| {
+                        (
+                            CandidateReport {
+                                name: k.name(),
+                                testable: false,
+                                significant: false,
+                                p_value: 1.0,
+                                heldout_p_value: 1.0,
+                                params: Vec::new(),
+                                train_nrmse_before: train_before,
+                                train_nrmse_after: f64::NAN,
+                                heldout_nrmse_before: heldout_before,
+                                heldout_nrmse_after: f64::NAN,
+                                motor_shift: Vec::new(),
+                                motor: None,
+                                effects: base.effects,
+                                failure: Some("the refit stopped unexpectedly".into()),
+                            },
+                            Vec::new(),
+                            None,
+                        )
+                    })
+                })
+                .collect()
+        });
+        results.extend(part);
+    }
+    let scores: Vec<CandidateScore<'_>> = results
+        .iter()
+        .map(|(c, sse, statistic)| CandidateScore {
+            name: c.name,
+            extra_params: c.params.len(),
+            testable: c.testable && sse.len() == sse_before.len(),
+            train_statistic: *statistic,
+            heldout_sse_before: &sse_before,
+            heldout_sse_after: sse,
+        })
+        .collect();
+    let verdict = rank_candidates(&scores, &settings.verdict);
+    let mut candidates: Vec<CandidateReport> = results.into_iter().map(|(c, _, _)| c).collect();
+    for c in &mut candidates {
+        if let Some(r) = verdict.ranked.iter().find(|r| r.name == c.name) {
+            c.significant = r.significant;
+            c.p_value = r.p_value;
+            c.heldout_p_value = r.heldout_p_value;
+        }
+    }
+    Stage {
+        base: base.effects.list().iter().map(Effect::name).collect(),
+        candidates,
+        verdict,
+    }
+}
