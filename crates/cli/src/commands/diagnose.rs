@@ -274,7 +274,7 @@ fn print_report(d: &Diagnosis, seconds: f64) {
     if !findings.is_empty() {
         println!("Where the nominal model misses:");
         for f in findings.iter().take(5) {
-            println!("  {}: {}", f.record, f.text);
+            println!("  {}", f.text);
         }
     }
     for (k, stage) in d.stages.iter().enumerate() {
