@@ -110,6 +110,7 @@ pub struct AxisRecord<'a> {
 
 /// What became of the constant offset of an inverse-model fit.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum OffsetStatus {
     /// Fitted with the other parameters (the axis moved both ways).
     Fitted,

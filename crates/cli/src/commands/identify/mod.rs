@@ -4,9 +4,10 @@ mod batch;
 
 use anyhow::Result;
 use fit::{
-    fit_apparent_resistance, identify_inverse_model, parameter_estimates, record_speed,
-    steady_value, torque_constant, voltage_input, ExcitedRecord, FullFit, InverseModelSettings,
-    PaperIdentification, TorqueConstantError, MECHANICAL_NAMES, PARAM_NAMES,
+    fit_apparent_resistance, identify_inverse_model_pooled, parameter_estimates, record_speed,
+    steady_value, torque_constant, voltage_input, AxisRecord, ExcitedRecord, FullFit,
+    InverseModelSettings, OffsetStatus, PaperIdentification, TorqueConstantError, MECHANICAL_NAMES,
+    PARAM_NAMES,
 };
 use motor_model::Derived;
 use serde_json::{json, Value};
@@ -291,38 +292,44 @@ fn run_steady(a: &IdentifyArgs) -> Result<()> {
 /// `--input current`: J, f, Ts and the offset of a current-driven axis by inverse-model least
 /// squares (the EMPS benchmark's IDIM-LS).
 fn run_current(a: &IdentifyArgs) -> Result<()> {
-    let path = match a.record.as_slice() {
-        [one] => one,
-        [] => {
-            return Err(BadInput(
-                "--input current needs --record FILE.csv (current and position of the axis)".into(),
-            )
-            .into())
-        }
-        more => {
-            return Err(BadInput(format!(
-                "--input current identifies one record; {} were given",
-                more.len()
-            ))
-            .into())
-        }
-    };
+    if a.record.is_empty() {
+        return Err(BadInput(
+            "--input current needs --record FILE.csv (current and position of the axis; repeatable: records of one axis are pooled)".into(),
+        )
+        .into());
+    }
     if a.decimation == 0 {
         return Err(
             BadInput("--decimation 0: expected a factor of 1 (none) or more".into()).into(),
         );
     }
-    let rec = read_mapped(path, &column_map(a)?, false)?;
-    let shown = path.display();
-    let position = rec.position.as_ref().ok_or_else(|| {
-        BadInput(format!("{shown}: no position column: --input current fits J, f, Ts from the position (map it with --columns position=HEADER)"))
-    })?;
+    let map = column_map(a)?;
+    let recs: Vec<motor_model::Record> = a
+        .record
+        .iter()
+        .map(|p| read_mapped(p, &map, false))
+        .collect::<Result<_>>()?;
+    for (path, rec) in a.record.iter().zip(&recs) {
+        if rec.position.is_none() {
+            return Err(BadInput(format!("{}: no position column: --input current fits J, f, Ts from the position (map it with --columns position=HEADER)", path.display())).into());
+        }
+    }
+    let path = &a.record[0];
+    let rec = &recs[0];
+    let shown = a
+        .record
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ");
+    let position = rec.position.as_deref().unwrap_or_default();
     let dt = motor_model::mean_period(&rec.t);
-    // The torque constant: given, or from the voltage equation (2a) when the armature voltage
-    // is recorded.
+    // The torque constant: given, or from the voltage equation (2a) of the first record when
+    // the armature voltage is recorded.
     let input = match a.torque_constant {
         None if !rec.voltage.is_empty() => Some(
-            voltage_input(&rec.t, &rec.voltage).map_err(|e| BadInput(format!("{shown}: {e}")))?,
+            voltage_input(&rec.t, &rec.voltage)
+                .map_err(|e| BadInput(format!("{}: {e}", path.display())))?,
         ),
         _ => None,
     };
@@ -341,20 +348,41 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
                 BadInput(format!("--torque-constant {k}: expected a positive number"))
             }
             TorqueConstantError::VoltageEquation(e) => BadInput(format!(
-                "{shown}: k from the voltage: {e} (give --torque-constant K)"
+                "{}: k from the voltage: {e} (give --torque-constant K)",
+                path.display()
             )),
             _ => BadInput("--input current needs --torque-constant K (the torque or force per unit of the current column) or a voltage column to estimate it from".into()),
         })?;
     let k_source = k_source.text();
-    let torque: Vec<f64> = rec.current.iter().map(|i| k * i).collect();
+    let torques: Vec<Vec<f64>> = recs
+        .iter()
+        .map(|r| r.current.iter().map(|i| k * i).collect())
+        .collect();
+    let axis_records: Vec<AxisRecord<'_>> = recs
+        .iter()
+        .zip(&torques)
+        .map(|(r, torque)| AxisRecord {
+            dt: motor_model::mean_period(&r.t),
+            torque,
+            position: r.position.as_deref().unwrap_or_default(),
+        })
+        .collect();
     let settings = InverseModelSettings {
         position_cutoff_hz: a.cutoff,
         position_filter_order: 4,
         decimation: a.decimation,
         fit_offset: true,
     };
-    let fit = identify_inverse_model(dt, &torque, position, settings)
+    let fit = identify_inverse_model_pooled(&axis_records, settings)
         .map_err(|e| BadInput(format!("{shown}: {e}")))?;
+    let offset_note = match fit.offset_status {
+        OffsetStatus::Fitted => None,
+        OffsetStatus::FixedOneDirection => Some(
+            "the axis moves one way only: the offset is fixed at 0 and Ts includes any constant load (add a record moving the other way to separate them)",
+        ),
+        OffsetStatus::FixedBySettings => Some("the offset is fixed at 0"),
+        _ => Some("the offset is fixed at 0"),
+    };
     let units = match a.axis {
         AxisArg::Rotary => ["kg·m²", "N·m·s/rad", "N·m", "N·m"],
         AxisArg::Linear => ["kg", "N·s/m", "N", "N"],
@@ -445,11 +473,14 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
                 "torque_residual_rms": fit.residual_rms,
                 "nrmse_fit_percent": fit.nrmse_fit_percent,
                 "correlation": fit.correlation.as_ref().map(|c| json!({
-                    "order": MECHANICAL_NAMES,
-                    "matrix": (0..4).map(|i| (0..4).map(|j| c[(i, j)]).collect::<Vec<f64>>()).collect::<Vec<_>>(),
+                    "order": &MECHANICAL_NAMES[..c.nrows().min(4)],
+                    "matrix": (0..c.nrows()).map(|i| (0..c.ncols()).map(|j| c[(i, j)]).collect::<Vec<f64>>()).collect::<Vec<_>>(),
                 })),
             },
             "settings": {"cutoff_hz": a.cutoff, "decimation": a.decimation, "torque_constant": k, "torque_constant_source": k_source},
+            "records": a.record.len(),
+            "offset_fitted": fit.offset_status == OffsetStatus::Fitted,
+            "offset_note": offset_note,
         });
         println!("{}", serde_json::to_string_pretty(&report)?);
         return Ok(());
@@ -459,6 +490,9 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
     );
     if k_source != "given" {
         println!("torque constant k = {} from the {k_source}", sig(k));
+    }
+    if let Some(note) = offset_note {
+        println!("note: {note}");
     }
     println!("      {:>12}   {:<27} unit", "value", "95% CI");
     for (name, value, ci, unit) in rows() {
