@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{assert_bad_input, motorid, scratch, simulate_to, stderr, stdout};
+use common::{assert_bad_input, motorid, scratch, simulate_to, stderr, stdout, LOGGER};
 
 /// A high and a low step of the small servo through a 10-bit logger and a 2000-count encoder,
 /// with `effect` (if any) in the plant.
@@ -21,18 +21,11 @@ fn steps(dir: &std::path::Path, effect: Option<&str>) -> (String, String) {
             "0.6",
             "--rate",
             "5000",
-            "--adc-bits",
-            "10",
-            "--noise-lsb",
-            "1",
-            "--encoder-cpr",
-            "2000",
-            "--speed-from",
-            "encoder",
             "--seed",
             seed,
             "--quiet",
         ];
+        args.extend(LOGGER);
         if let Some(e) = effect {
             args.extend(["--effect", e]);
         }

@@ -664,6 +664,23 @@ fn run_stage(
     let train_before = nrmse_summary(&base.train_fitted, train_mask);
     let heldout_before = nrmse_summary(&base.heldout_fitted, held_mask);
     let sse_before = block_sse(&base.heldout_fitted, sigmas, held, block);
+    // The report of a candidate whose refit failed.
+    let failed = |kind: EffectKind, effects: Effects, why: String| CandidateReport {
+        name: kind.name(),
+        testable: false,
+        significant: false,
+        p_value: 1.0,
+        heldout_p_value: 1.0,
+        params: Vec::new(),
+        train_nrmse_before: train_before,
+        train_nrmse_after: f64::NAN,
+        heldout_nrmse_before: heldout_before,
+        heldout_nrmse_after: f64::NAN,
+        motor_shift: Vec::new(),
+        motor: None,
+        effects,
+        failure: Some(why),
+    };
     let done = std::sync::atomic::AtomicUsize::new(0);
     progress(DiagnoseProgress::Candidates {
         stage: stage_no,
@@ -736,26 +753,7 @@ fn run_stage(
                     statistic,
                 )
             }
-            Err(why) => (
-                CandidateReport {
-                    name: kind.name(),
-                    testable: false,
-                    significant: false,
-                    p_value: 1.0,
-                    heldout_p_value: 1.0,
-                    params: Vec::new(),
-                    train_nrmse_before: train_before,
-                    train_nrmse_after: f64::NAN,
-                    heldout_nrmse_before: heldout_before,
-                    heldout_nrmse_after: f64::NAN,
-                    motor_shift: Vec::new(),
-                    motor: None,
-                    effects,
-                    failure: Some(why),
-                },
-                Vec::new(),
-                None,
-            ),
+            Err(why) => (failed(kind, effects, why), Vec::new(), None),
         };
         let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
         progress(DiagnoseProgress::Candidates {
@@ -781,22 +779,7 @@ fn run_stage(
                 .map(|(h, &k)| {
                     h.join().unwrap_or_else(|_| {
                         (
-                            CandidateReport {
-                                name: k.name(),
-                                testable: false,
-                                significant: false,
-                                p_value: 1.0,
-                                heldout_p_value: 1.0,
-                                params: Vec::new(),
-                                train_nrmse_before: train_before,
-                                train_nrmse_after: f64::NAN,
-                                heldout_nrmse_before: heldout_before,
-                                heldout_nrmse_after: f64::NAN,
-                                motor_shift: Vec::new(),
-                                motor: None,
-                                effects: base.effects,
-                                failure: Some("the refit stopped unexpectedly".into()),
-                            },
+                            failed(k, base.effects, "the refit stopped unexpectedly".into()),
                             Vec::new(),
                             None,
                         )
