@@ -237,3 +237,47 @@ fn a_return_to_zero_volts_on_a_unipolar_adc_is_read_at_its_rail() {
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
     assert_truth_in_intervals(&v, &TRUTH);
 }
+
+/// Two steps of a small servo (0.6 s at 5 kHz through the logger) by output error: the
+/// equation-error start averaged each record's own inverse model and ended in a wrong minimum
+/// (R 5.6, k 0.017, refused); one inverse model over both records starts it right.
+#[test]
+fn small_servo_steps_by_output_error_start_from_the_pooled_torque_equation() {
+    let dir = scratch("wrong_servo_oe");
+    let mut paths = Vec::new();
+    for (volts, seed) in [("12", "1"), ("3", "2")] {
+        let path = dir.join(format!("s{volts}.csv"));
+        let mut args = vec![
+            "--motor",
+            "../../fixtures/motors/small_servo.json",
+            "--voltage",
+            volts,
+            "--duration",
+            "0.6",
+            "--rate",
+            "5000",
+            "--seed",
+            seed,
+            "--quiet",
+        ];
+        args.extend(LOGGER);
+        simulate_to(&path, &args);
+        paths.push(path.to_str().unwrap().to_string());
+    }
+    let out = motorid(&[
+        "identify", "--record", &paths[0], "--record", &paths[1], "--json",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let report: Value = serde_json::from_str(&stdout(&out)).unwrap();
+    assert_truth_in_intervals(
+        &report,
+        &[
+            ("R", 2.0),
+            ("L", 0.002),
+            ("k", 0.05),
+            ("f", 0.0004),
+            ("J", 2e-5),
+            ("Ts", 0.004),
+        ],
+    );
+}

@@ -26,7 +26,7 @@ use crate::input_uncertainty::{
     VoltageScale,
 };
 use crate::lm::{LeastSquares, LmSettings, NormalEquations};
-use crate::mechanical::{identify_inverse_model, InverseModelSettings};
+use crate::mechanical::{identify_inverse_model_pooled, AxisRecord, InverseModelSettings};
 use crate::parameters::Parameters;
 use crate::plausibility::RecordFacts;
 use crate::signal::Butterworth;
@@ -957,35 +957,36 @@ fn equation_error_estimate(
         reason,
     };
     let ([r, l, k], per_record) = electrical_estimate(records, fraction)?;
-    // The mechanical side on the motor torque k I, record by record, pooled by sample count.
-    let (mut sum, mut weight) = ([0.0; 3], 0.0);
-    for (rec, (dt, position)) in records.iter().zip(&per_record) {
-        let torque: Vec<f64> = rec.current.iter().map(|i| k * i).collect();
-        // Accelerations are second differences of a quantised angle: filter harder than the
-        // electrical side and average by decimation, or the noise in the acceleration
-        // regressor biases J towards zero.
-        let settings = InverseModelSettings {
-            position_cutoff_hz: 0.2 * fraction / dt,
-            position_filter_order: 4,
-            decimation: 5,
-            // Eq. (2b) has no offset; with one, a record that never reverses cannot tell it
-            // from Ts (a 40 V step gave Ts = 2443 N·m against an offset of −2443 N·m).
-            fit_offset: false,
-        };
-        if let Ok(m) = identify_inverse_model(*dt, &torque, position, settings) {
-            let w = rec.current.len() as f64;
-            for (s, v) in sum.iter_mut().zip(m.values) {
-                *s += w * v;
-            }
-            weight += w;
-        }
-    }
-    if weight == 0.0 {
-        return Err(domain(
-            "no record lets the torque equation be solved: the motor must move".into(),
-        ));
-    }
-    let [j, f, ts] = sum.map(|s| s / weight);
+    // The mechanical side on the motor torque k I: one inverse model over every record (each
+    // filtered on its own, samples at rest left out), so that its error is the real one.
+    let torques: Vec<Vec<f64>> = records
+        .iter()
+        .map(|rec| rec.current.iter().map(|i| k * i).collect())
+        .collect();
+    let axis: Vec<AxisRecord<'_>> = per_record
+        .iter()
+        .zip(&torques)
+        .map(|((dt, position), torque)| AxisRecord {
+            dt: *dt,
+            torque,
+            position,
+        })
+        .collect();
+    let dt_max = per_record.iter().map(|(dt, _)| *dt).fold(0.0_f64, f64::max);
+    // Accelerations are second differences of a quantised angle: filter harder than the
+    // electrical side and average by decimation, or the noise in the acceleration regressor
+    // biases J towards zero.
+    let settings = InverseModelSettings {
+        position_cutoff_hz: 0.2 * fraction / dt_max,
+        position_filter_order: 4,
+        decimation: 5,
+        // Eq. (2b) has no offset; with one, a record that never reverses cannot tell it from
+        // Ts (a 40 V step gave Ts = 2443 N·m against an offset of −2443 N·m).
+        fit_offset: false,
+    };
+    let mechanical = identify_inverse_model_pooled(&axis, settings)
+        .map_err(|e| domain(format!("the torque equation (2b): {e}")))?;
+    let [j, f, ts, _] = mechanical.values;
     if !(j > 0.0 && j.is_finite()) {
         return Err(domain(format!(
             "J = {j:.4e} kg·m² from the torque equation: the records show too little acceleration"
