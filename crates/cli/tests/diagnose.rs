@@ -4,36 +4,7 @@
 
 mod common;
 
-use common::{assert_bad_input, motorid, scratch, simulate_to, stderr, stdout, LOGGER};
-
-/// A high and a low step of the small servo through a 10-bit logger and a 2000-count encoder,
-/// with `effect` (if any) in the plant.
-fn steps(dir: &std::path::Path, effect: Option<&str>) -> (String, String) {
-    let mut paths = Vec::new();
-    for (volts, seed) in [("12", "1"), ("3", "2")] {
-        let path = dir.join(format!("s{volts}.csv"));
-        let mut args = vec![
-            "--motor",
-            "../../fixtures/motors/small_servo.json",
-            "--voltage",
-            volts,
-            "--duration",
-            "0.6",
-            "--rate",
-            "5000",
-            "--seed",
-            seed,
-            "--quiet",
-        ];
-        args.extend(LOGGER);
-        if let Some(e) = effect {
-            args.extend(["--effect", e]);
-        }
-        simulate_to(&path, &args);
-        paths.push(path.to_str().unwrap().to_string());
-    }
-    (paths[0].clone(), paths[1].clone())
-}
+use common::{assert_bad_input, motorid, scratch, small_servo_steps, stderr, stdout};
 
 fn diagnose_json(high: &str, low: &str) -> serde_json::Value {
     let out = motorid(&[
@@ -56,7 +27,7 @@ fn diagnose_json(high: &str, low: &str) -> serde_json::Value {
 #[test]
 fn a_withheld_quadratic_drag_is_named_with_its_size() {
     let dir = scratch("diagnose_drag");
-    let (high, low) = steps(&dir, Some("quadratic_drag:c=2e-7"));
+    let [high, low] = small_servo_steps(&dir, Some("quadratic_drag:c=2e-7"));
     let report = diagnose_json(&high, &low);
     assert_eq!(report["verdict"], "quadratic_drag", "{report:#}");
     let drag = report["effects"]
@@ -83,7 +54,7 @@ fn a_withheld_quadratic_drag_is_named_with_its_size() {
 #[test]
 fn the_nominal_servo_is_diagnosed_as_none() {
     let dir = scratch("diagnose_none");
-    let (high, low) = steps(&dir, None);
+    let [high, low] = small_servo_steps(&dir, None);
     let report = diagnose_json(&high, &low);
     assert_eq!(report["verdict"], "none", "{report:#}");
     assert!(report["effects"]
@@ -101,7 +72,7 @@ fn bad_input_is_refused_naming_the_file() {
         "/nonexistent/r.csv",
     );
     let dir = scratch("diagnose_bad");
-    let (high, low) = steps(&dir, None);
+    let [high, low] = small_servo_steps(&dir, None);
     assert_bad_input(
         &[
             "diagnose",

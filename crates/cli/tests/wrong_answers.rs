@@ -4,8 +4,8 @@
 mod common;
 
 use common::{
-    assert_truth_in_intervals, interval, motorid, scratch, simulate_to, stderr, stdout, LOGGER,
-    PAPER_TRUTH as TRUTH,
+    assert_truth_in_intervals, interval, motorid, scratch, simulate_to, small_servo_steps, stderr,
+    stdout, LOGGER, PAPER_TRUTH as TRUTH,
 };
 use serde_json::Value;
 
@@ -243,27 +243,7 @@ fn a_return_to_zero_volts_on_a_unipolar_adc_is_read_at_its_rail() {
 /// (R 5.6, k 0.017, refused); one inverse model over both records starts it right.
 #[test]
 fn small_servo_steps_by_output_error_start_from_the_pooled_torque_equation() {
-    let dir = scratch("wrong_servo_oe");
-    let mut paths = Vec::new();
-    for (volts, seed) in [("12", "1"), ("3", "2")] {
-        let path = dir.join(format!("s{volts}.csv"));
-        let mut args = vec![
-            "--motor",
-            "../../fixtures/motors/small_servo.json",
-            "--voltage",
-            volts,
-            "--duration",
-            "0.6",
-            "--rate",
-            "5000",
-            "--seed",
-            seed,
-            "--quiet",
-        ];
-        args.extend(LOGGER);
-        simulate_to(&path, &args);
-        paths.push(path.to_str().unwrap().to_string());
-    }
+    let paths = small_servo_steps(&scratch("wrong_servo_oe"), None);
     let out = motorid(&[
         "identify", "--record", &paths[0], "--record", &paths[1], "--json",
     ]);

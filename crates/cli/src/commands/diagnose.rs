@@ -74,12 +74,6 @@ fn settings(a: &DiagnoseArgs) -> Result<Settings> {
     })
 }
 
-impl Settings {
-    fn columns_for_steps(&self) -> ColumnMap {
-        self.columns.clone()
-    }
-}
-
 pub fn run(a: &DiagnoseArgs) -> Result<()> {
     let s = settings(a)?;
     let load = |paths: &[PathBuf]| -> Result<Vec<LoadedExcited>> {
@@ -100,10 +94,10 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
     let label = names.join(", ");
     // The start: the step pair's identification when there is one (the paper's method, else
     // the full step fit), the equation-error estimate otherwise.
-    let start = match (&s.pair, s.columns_for_steps()) {
-        (Some((high, low)), columns) => {
-            let hv = load_step(high, &columns, true)?;
-            let lv = load_step(low, &columns, true)?;
+    let start = match &s.pair {
+        Some((high, low)) => {
+            let hv = load_step(high, &s.columns, true)?;
+            let lv = load_step(low, &s.columns, true)?;
             let (hv, lv, _) = in_order(hv, lv);
             identify_pair(&hv, &lv, StepMethod::Paper)?
                 .params()
@@ -114,7 +108,7 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
                     ))
                 })?
         }
-        (None, _) => equation_error_start(&train).map_err(|e| BadInput(format!("{label}: {e}")))?,
+        None => equation_error_start(&train).map_err(|e| BadInput(format!("{label}: {e}")))?,
     };
     let t0 = Instant::now();
     let quiet = s.quiet;

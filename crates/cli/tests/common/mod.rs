@@ -134,3 +134,31 @@ pub fn assert_truth_in_intervals(report: &serde_json::Value, truth: &[(&str, f64
         );
     }
 }
+
+/// A high (12 V) and a low (3 V) step of `fixtures/motors/small_servo.json`, 0.6 s at 5 kHz
+/// through [`LOGGER`] (seeds 1 and 2), with `effect` (if any) in the plant, written into `dir`:
+/// their paths.
+pub fn small_servo_steps(dir: &std::path::Path, effect: Option<&str>) -> [String; 2] {
+    [("12", "1"), ("3", "2")].map(|(volts, seed)| {
+        let path = dir.join(format!("s{volts}.csv"));
+        let mut args = vec![
+            "--motor",
+            "../../fixtures/motors/small_servo.json",
+            "--voltage",
+            volts,
+            "--duration",
+            "0.6",
+            "--rate",
+            "5000",
+            "--seed",
+            seed,
+            "--quiet",
+        ];
+        args.extend(LOGGER);
+        if let Some(e) = effect {
+            args.extend(["--effect", e]);
+        }
+        simulate_to(&path, &args);
+        path.to_str().unwrap().to_string()
+    })
+}

@@ -1131,6 +1131,17 @@ fn floor_model(rec: &ResidualRecord, ch: &ResidualChannel, y_ss: f64) -> FloorMo
     FloorModel { v, w, keep, report }
 }
 
+/// The correlation factor `1 + 2 Σₖ ρₖ²` of `x` over lags 1..=max_lag ([`autocorrelation`]):
+/// how much correlation in time inflates the variance of a sum of squares of `x`.
+pub(crate) fn correlation_factor(x: &[f64], max_lag: usize) -> f64 {
+    factor_of(&autocorrelation(x, max_lag))
+}
+
+/// `1 + 2 Σₖ ρₖ²` of the autocorrelations `rho`.
+fn factor_of(rho: &[f64]) -> f64 {
+    1.0 + 2.0 * rho.iter().map(|p| p * p).sum::<f64>()
+}
+
 /// Autocorrelation of `x` (mean removed) at lags 1..=max_lag (biased estimator, as `resid`).
 fn autocorrelation(x: &[f64], max_lag: usize) -> Vec<f64> {
     let n = x.len();
@@ -1240,7 +1251,7 @@ fn localise_channel(
         .map(|(&r, &k)| if k { r } else { 0.0 })
         .collect();
     let rho = autocorrelation(&r, settings.max_lag.min(n - 1));
-    let c = 1.0 + 2.0 * rho.iter().map(|p| p * p).sum::<f64>();
+    let c = factor_of(&rho);
     let prefix = Prefix::new(&r, &floor);
     let overall = excess_test(prefix.sums(0, n), n, c, family_alpha);
     let encoder = ch.kind == Channel::EncoderSpeed;

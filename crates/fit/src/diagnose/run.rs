@@ -24,7 +24,7 @@ use motor_model::{
 use serde::Serialize;
 
 use crate::diagnose::localise::{
-    localise, Localisation, LocaliseSettings, ResidualChannel, ResidualRecord,
+    correlation_factor, localise, Localisation, LocaliseSettings, ResidualChannel, ResidualRecord,
 };
 use crate::diagnose::verdict::{rank_candidates, CandidateScore, Verdict, VerdictSettings};
 use crate::error::FitError;
@@ -336,21 +336,7 @@ fn train_statistic(
             .iter()
             .map(|&j| ((b.measured[j] - b.model[j]) / sigma).powi(2))
             .sum();
-        let mean = e.iter().sum::<f64>() / e.len() as f64;
-        let var: f64 = e.iter().map(|v| (v - mean).powi(2)).sum();
-        let factor = if var > 0.0 {
-            1.0 + 2.0
-                * (1..=CORRELATION_LAGS)
-                    .map(|k| {
-                        let c: f64 = (k..e.len())
-                            .map(|i| (e[i] - mean) * (e[i - k] - mean))
-                            .sum();
-                        (c / var).powi(2)
-                    })
-                    .sum::<f64>()
-        } else {
-            1.0
-        };
+        let factor = correlation_factor(&e, CORRELATION_LAGS);
         fall += sse_before - sse_after;
         factor_sum += factor * e.len() as f64;
         count += e.len();
