@@ -435,8 +435,8 @@ fn determined(estimates: &[EffectEstimate]) -> bool {
 struct Base<'a> {
     motor: MotorParams,
     effects: Effects,
-    train_fitted: Vec<FittedChannel>,
-    heldout_fitted: Vec<FittedChannel>,
+    /// Its prediction on every sample of every record (training and held out).
+    fitted: Vec<FittedChannel>,
     train: &'a [ExcitedRecord<'a>],
     all: &'a [ExcitedRecord<'a>],
 }
@@ -522,8 +522,7 @@ pub fn diagnose(
     let mut base = Base {
         motor: nominal.params,
         effects: Effects::none(),
-        train_fitted: nominal_all.clone(),
-        heldout_fitted: nominal_all,
+        fitted: nominal_all,
         train: &train,
         all: &all,
     };
@@ -564,8 +563,7 @@ pub fn diagnose(
         base = Base {
             motor,
             effects,
-            train_fitted: fitted.clone(),
-            heldout_fitted: fitted,
+            fitted,
             train: &train,
             all: &all,
         };
@@ -647,9 +645,9 @@ fn run_stage(
     let block = settings.block_samples.max(1);
     let train_mask = |ch: &FittedChannel, i: usize| !held.get(ch.record).is_some_and(|h| h[i]);
     let held_mask = |ch: &FittedChannel, i: usize| held.get(ch.record).is_some_and(|h| h[i]);
-    let train_before = nrmse_summary(&base.train_fitted, train_mask);
-    let heldout_before = nrmse_summary(&base.heldout_fitted, held_mask);
-    let sse_before = block_sse(&base.heldout_fitted, sigmas, held, block);
+    let train_before = nrmse_summary(&base.fitted, train_mask);
+    let heldout_before = nrmse_summary(&base.fitted, held_mask);
+    let sse_before = block_sse(&base.fitted, sigmas, held, block);
     // The report of a candidate whose refit failed.
     let failed = |kind: EffectKind, effects: Effects, why: String| CandidateReport {
         name: kind.name(),
@@ -697,7 +695,7 @@ fn run_stage(
                     .cloned()
                     .collect();
                 let sse = block_sse(&pred, sigmas, held, block);
-                let statistic = train_statistic(&base.train_fitted, &pred, sigmas, held);
+                let statistic = train_statistic(&base.fitted, &pred, sigmas, held);
                 let motor_shift = PARAM_NAMES
                     .iter()
                     .zip(base.motor.values())
