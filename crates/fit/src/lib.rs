@@ -94,8 +94,8 @@ pub use plausibility::Refusal;
 pub use signal::{decimate, Butterworth};
 pub use start::steady_state_start;
 pub use stats::{
-    newey_west_lags, newey_west_score_covariance, sandwich_uncertainty, student_t_quantile,
-    uncertainty, NeweyWest, Uncertainty,
+    equal_runs, newey_west_lags, newey_west_run_covariance, newey_west_score_covariance,
+    sandwich_uncertainty, student_t_quantile, uncertainty, NeweyWest, Uncertainty,
 };
 pub use steady_fit::{fit_apparent_resistance, SteadyFit};
 pub use step_location::{locate_step, locate_step_with, StepLocation};

@@ -30,7 +30,7 @@ use crate::mechanical::{identify_inverse_model_pooled, AxisRecord, InverseModelS
 use crate::parameters::Parameters;
 use crate::plausibility::RecordFacts;
 use crate::signal::Butterworth;
-use crate::stats::newey_west_score_covariance;
+use crate::stats::{equal_runs, newey_west_run_covariance};
 use crate::step_location::uniform_period;
 
 /// Step of the forward-difference Jacobian in `θ = ln p` (relative step of each parameter).
@@ -466,7 +466,14 @@ impl WeightedProblem for OeProblem {
             .iter()
             .flat_map(|rec| rec.channels.iter().map(|ch| ch.data.len()))
             .collect();
-        newey_west_score_covariance(&r, &jac, &series)
+        // Readings that repeat exactly share one quantisation error: see
+        // [`newey_west_run_covariance`].
+        let runs: Vec<usize> = self
+            .records
+            .iter()
+            .flat_map(|rec| rec.channels.iter().flat_map(|ch| equal_runs(&ch.data)))
+            .collect();
+        newey_west_run_covariance(&r, &jac, &series, &runs)
     }
 
     fn fitted_channels(&self, theta: &[f64]) -> Vec<FittedChannel> {

@@ -129,14 +129,52 @@ pub fn newey_west_score_covariance(
     jac: &DMatrix<f64>,
     series: &[usize],
 ) -> Option<DMatrix<f64>> {
+    newey_west_run_covariance(r, jac, series, &vec![1; r.len()])
+}
+
+/// [`newey_west_score_covariance`] of rows grouped into runs whose errors move together:
+/// `runs` are the run lengths in row order (each series a whole number of runs). The scores
+/// `rᵢ ∂rᵢ/∂θ` are summed within each run and Newey–West is taken over the run sums, with
+/// [`newey_west_lags`] of the number of runs of each series. A quantiser without noise
+/// holds one code while the signal moves less than a step, so its error is one-signed for
+/// as long as the code lasts — seconds on a slow settling tail, far beyond any fixed lag —
+/// and runs of equal readings ([`equal_runs`]) are then the unit of independent error;
+/// with noise of a step or more the runs are a sample or two and this is the plain
+/// estimate. `None` if the lengths do not add up or an entry is not finite.
+pub fn newey_west_run_covariance(
+    r: &[f64],
+    jac: &DMatrix<f64>,
+    series: &[usize],
+    runs: &[usize],
+) -> Option<DMatrix<f64>> {
     let (n, p) = jac.shape();
-    if r.len() != n || series.iter().sum::<usize>() != n {
+    if r.len() != n || series.iter().sum::<usize>() != n || runs.iter().sum::<usize>() != n {
         return None;
     }
-    let g = DMatrix::from_fn(n, p, |i, j| r[i] * jac[(i, j)]);
+    // Run sums of the scores, and each series' length in runs.
+    let mut g = DMatrix::zeros(runs.len(), p);
+    let mut run_series = Vec::with_capacity(series.len());
+    let (mut row, mut run) = (0, 0);
+    for &len in series {
+        let (end, first) = (row + len, run);
+        while row < end {
+            let width = *runs.get(run)?;
+            if width == 0 || row + width > end {
+                return None;
+            }
+            for i in row..row + width {
+                for j in 0..p {
+                    g[(run, j)] += r[i] * jac[(i, j)];
+                }
+            }
+            row += width;
+            run += 1;
+        }
+        run_series.push(run - first);
+    }
     let mut total = DMatrix::zeros(p, p);
     let mut at = 0;
-    for &len in series {
+    for &len in &run_series {
         let block = g.rows(at, len);
         total += block.transpose() * block;
         let lags = newey_west_lags(len).max(1).min(len.saturating_sub(1));
@@ -150,6 +188,22 @@ pub fn newey_west_score_covariance(
         at += len;
     }
     total.iter().all(|v| v.is_finite()).then_some(total)
+}
+
+/// The lengths of the runs of exactly equal consecutive values of `data` (a quantised
+/// reading), in order; they sum to `data.len()`.
+pub fn equal_runs(data: &[f64]) -> Vec<usize> {
+    let mut runs = Vec::new();
+    let mut i = 0;
+    while i < data.len() {
+        let j = data[i..]
+            .iter()
+            .position(|v| v.to_bits() != data[i].to_bits())
+            .map_or(data.len(), |d| i + d);
+        runs.push(j - i);
+        i = j;
+    }
+    runs
 }
 
 /// Newey–West accumulator of the covariance of a score `Σᵢ gᵢ` over one time series of
@@ -409,6 +463,39 @@ fn beta_continued_fraction(x: f64, a: f64, b: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn equal_runs_split_repeated_readings() {
+        assert_eq!(equal_runs(&[1.0, 1.0, 2.0, 2.0, 2.0, 1.0]), vec![2, 3, 1]);
+        assert_eq!(equal_runs(&[]), Vec::<usize>::new());
+        assert_eq!(equal_runs(&[0.5]), vec![1]);
+    }
+
+    /// A run of `m` rows sharing one error counts once, with `m²` times one row's score
+    /// variance (rows of equal score), where rows taken apart count `m` times; runs of one row
+    /// give back the plain estimate; lengths that do not add up are refused.
+    #[test]
+    fn runs_are_one_error_each() {
+        let n = 400;
+        let jac = DMatrix::from_fn(n, 1, |_, _| 1.0);
+        // An error held for four samples at a time, sign alternating from run to run.
+        let r: Vec<f64> = (0..n)
+            .map(|i| if (i / 4) % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        let plain = newey_west_score_covariance(&r, &jac, &[n]).unwrap();
+        let ones = newey_west_run_covariance(&r, &jac, &[n], &vec![1; n]).unwrap();
+        assert_eq!(plain, ones);
+        let runs = newey_west_run_covariance(&r, &jac, &[n], &vec![4; n / 4]).unwrap();
+        // Run sums ±4, alternating: lag-0 term 100 · 16; the Bartlett lags of the alternating
+        // series take some of it back, never all.
+        assert!(runs[(0, 0)] > 0.0 && runs[(0, 0)] < 1600.0 + 1e-9);
+        let same = vec![1.0; n];
+        let held = newey_west_run_covariance(&same, &jac, &[n], &vec![4; n / 4]).unwrap();
+        let apart = newey_west_run_covariance(&same, &jac, &[n], &vec![1; n]).unwrap();
+        assert!(held[(0, 0)] > apart[(0, 0)]);
+        assert!(newey_west_run_covariance(&r, &jac, &[n], &[3; 100]).is_none());
+        assert!(newey_west_run_covariance(&r, &jac, &[200, 200], &[3, 397]).is_none());
+    }
 
     /// Reference quantiles t_{0.975, ν} from standard tables (e.g. NIST/SEMATECH e-Handbook,
     /// Table 1.3.6.7.2), printed to 3 decimals; tolerance 5e-4.

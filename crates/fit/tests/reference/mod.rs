@@ -274,7 +274,14 @@ fn covered(fit: &fit::FullFit, truth: &Motor, inside: &mut [usize; 6]) {
                 })
                 .collect()
         });
-        eprintln!("error / half-width: {}", z.join(" "));
+        let rel: Vec<String> = (0..6)
+            .map(|k| format!("{:+.1e}", fit.params.values()[k] / truth[k] - 1.0))
+            .collect();
+        eprintln!(
+            "error / half-width: {}; relative error: {}",
+            z.join(" "),
+            rel.join(" ")
+        );
     }
     if let Some(ci) = fit.ci95 {
         for k in 0..6 {
