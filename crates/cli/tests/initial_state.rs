@@ -8,20 +8,13 @@ mod common;
 
 use std::path::Path;
 
-use common::{assert_truth_in_intervals, motorid, scratch, simulate_to, stderr, stdout, LOGGER};
+use common::{
+    assert_truth_in_intervals, motorid, scratch, simulate_to, stderr, stdout, LOGGER,
+    SMALL_SERVO_TRUTH,
+};
 use serde_json::Value;
 
 const SERVO: &str = "../../fixtures/motors/small_servo.json";
-
-/// The small servo by parameter name (SI units).
-const SERVO_TRUTH: [(&str, f64); 6] = [
-    ("R", 2.0),
-    ("L", 0.002),
-    ("k", 0.05),
-    ("f", 0.0004),
-    ("J", 2e-5),
-    ("Ts", 0.004),
-];
 
 /// Writes `src` into `dst` without the samples before `from_s` (header and metadata kept).
 fn cut(src: &Path, dst: &Path, from_s: f64) {
@@ -104,7 +97,7 @@ fn a_record_from_a_steady_level_starts_its_simulation_there() {
         .as_str()
         .unwrap()
         .contains("flat over the first"));
-    assert_truth_in_family_region(&report, &SERVO_TRUTH);
+    assert_truth_in_family_region(&report, &SMALL_SERVO_TRUTH);
     // The table says it too.
     let out = motorid(&["identify", "--record", &path]);
     assert!(out.status.success(), "{}", stderr(&out));
@@ -132,7 +125,7 @@ fn a_step_pair_not_from_rest_goes_to_output_error_and_says_so() {
         .contains("the step methods need records that start at rest"));
     assert_eq!(report["initial_state"][0]["state"], "steady");
     assert_eq!(report["initial_state"][1]["state"], "rest");
-    assert_truth_in_intervals(&report, &SERVO_TRUTH);
+    assert_truth_in_intervals(&report, &SMALL_SERVO_TRUTH);
     // Forced to rest, the pair takes the step route as before.
     let forced = json_of(&[
         "identify",
@@ -168,7 +161,7 @@ fn a_slice_of_a_staircase_is_fitted_from_a_free_initial_state() {
     );
     let report = json_of(&["identify", "--record", &path, "--json"]);
     assert_eq!(report["initial_state"][0]["state"], "free");
-    assert_truth_in_intervals(&report, &SERVO_TRUTH);
+    assert_truth_in_intervals(&report, &SMALL_SERVO_TRUTH);
     let w0 = report["initial_state"][0]["speed"]["value"]
         .as_f64()
         .unwrap();

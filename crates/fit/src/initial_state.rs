@@ -74,8 +74,35 @@ const FLAT_SIGMAS: f64 = 4.0;
 /// changing (flat): sensor offsets, ripple, a motor within 0.5 % of its steady state.
 const FLOOR_FRACTION: f64 = 5e-3;
 
+/// Angles fitted by [`speed_at_start`].
+const START_ANGLES: usize = 6;
+
+/// The speed \[rad/s\] at the first sample of an encoder angle sampled every `dt` \[s\], and
+/// its standard error: the slope at t = 0 of `θ0 + Ω0 t + a t²/2` fitted by least squares to
+/// the first [`START_ANGLES`] angles, their noise the angle's own ([`noise_std`]: about a
+/// third of a count for a quantised one).
+fn speed_at_start(angle: &[f64], dt: f64) -> Option<(f64, f64)> {
+    let first = angle.get(..START_ANGLES)?;
+    let mut xtx = nalgebra::Matrix3::<f64>::zeros();
+    let mut xty = nalgebra::Vector3::<f64>::zeros();
+    for (k, th) in first.iter().enumerate() {
+        let t = k as f64 * dt;
+        let x = nalgebra::Vector3::new(1.0, t, 0.5 * t * t);
+        xtx += x * x.transpose();
+        xty += x * (th - first[0]);
+    }
+    let inv = xtx.try_inverse()?;
+    let beta = inv * xty;
+    let sigma = noise_std(angle);
+    Some((beta[1], sigma * inv[(1, 1)].sqrt())).filter(|(w, s)| w.is_finite() && s.is_finite())
+}
+
 /// The initial state `record` shows: at rest when the current and the speed at the first
-/// sample are 0 within 5 noise levels ([`noise_std`]) and 0.5 % of their largest |value|;
+/// sample are 0 within 5 noise levels ([`noise_std`]) and 0.5 % of their largest |value| (with
+/// an encoder, the speed at the first sample is the slope at t = 0 of a parabola fitted to the
+/// first 6 angles, within 5 of its standard errors: a difference of angles is the mean speed
+/// over a period in which a motor started at that sample already moves, and one count per
+/// sample can exceed the noise level of the speed);
 /// otherwise steady when both stay flat over the first level (the samples before the first
 /// change of voltage, at most a tenth of the record, at least 16: the means of its two halves
 /// within 4 standard errors and 0.5 % of the largest |value|), else free. The speed is the
@@ -114,8 +141,12 @@ pub fn detect_initial_state(record: &ExcitedRecord<'_>) -> Result<DetectedInitia
         FLOOR_FRACTION * peak(&speed),
     );
     let (c0, w0) = (current[0], speed[0]);
+    let (w_start, sw_start) = match record.position {
+        Some(angle) => speed_at_start(angle, record.dt).unwrap_or((w0, sw)),
+        None => (w0, sw),
+    };
     let e0 = record.input.volts_at(0.0);
-    if c0.abs() <= REST_SIGMAS * sc + fc && w0.abs() <= REST_SIGMAS * sw + fw {
+    if c0.abs() <= REST_SIGMAS * sc + fc && w_start.abs() <= REST_SIGMAS * sw_start + fw {
         return Ok(DetectedInitialState {
             state: InitialState::Rest,
             reason: format!(

@@ -8,6 +8,9 @@
 //! - [`identify_full_with_inputs`], [`identify_output_error_with_inputs`]: the step heights,
 //!   levels and instants as measured inputs whose uncertainty enters the intervals
 //!   ([`estimate_level`], [`StepInputs`], [`LevelPrior`]).
+//! - [`identify_output_error_with_initial_states`]: records that do not start at rest, each
+//!   started at rest, in the steady state of its first level (Eqs. (4), (5)) or from a free
+//!   initial current and speed ([`InitialState`], [`detect_initial_state`]).
 //! - [`identify_output_error_with_effects`]: the motor's six parameters and those of a set of
 //!   unmodelled effects (SPEC section 5) in one output-error fit, each named with its unit and
 //!   interval ([`EffectEstimate`]); every fit returns its fitted traces ([`FittedChannel`]).

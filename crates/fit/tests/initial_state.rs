@@ -1,10 +1,14 @@
 //! Output error on records that do not start at rest: a step from a steady 5 V to 15 V, and a
 //! slice cut from the middle of a staircase, against a step from rest to 15 V.
 
+mod common;
+
+use common::excited;
+
 use fit::{
     detect_initial_state, equation_error_start_with_initial_states,
-    identify_output_error_with_initial_states, voltage_levels, ExcitedRecord, FullFit,
-    InitialState, LmSettings, PARAM_NAMES,
+    identify_output_error_with_initial_states, voltage_levels, FullFit, InitialState, LmSettings,
+    PARAM_NAMES,
 };
 use motor_model::{Effects, Input, MeasurementModel, MotorParams, Record, Simulator, Trace};
 
@@ -85,15 +89,7 @@ fn staircase_slice(seed: u64) -> Record {
 /// and the equation-error start.
 fn identify(rec: &Record, want: InitialState) -> FullFit {
     let (input, priors) = voltage_levels(&rec.t, &rec.voltage, None).unwrap();
-    let records = [ExcitedRecord {
-        input: &input,
-        dt: rec.t[1] - rec.t[0],
-        current: &rec.current,
-        speed: None,
-        position: rec.position.as_deref(),
-        exclude_current: None,
-        exclude_speed: None,
-    }];
+    let records = [excited(rec, &input)];
     let detected = detect_initial_state(&records[0]).unwrap();
     assert_eq!(detected.state, want, "{}", detected.reason);
     let initial = [detected.state];
@@ -221,15 +217,7 @@ fn a_slice_from_the_middle_of_a_staircase_identifies_with_a_free_initial_state()
 fn a_steady_start_fitted_from_rest_is_not_a_result() {
     let rec = from_steady(SEEDS[0]);
     let (input, priors) = voltage_levels(&rec.t, &rec.voltage, None).unwrap();
-    let records = [ExcitedRecord {
-        input: &input,
-        dt: rec.t[1] - rec.t[0],
-        current: &rec.current,
-        speed: None,
-        position: rec.position.as_deref(),
-        exclude_current: None,
-        exclude_speed: None,
-    }];
+    let records = [excited(&rec, &input)];
     let initial = [InitialState::Rest];
     let Ok(start) = equation_error_start_with_initial_states(&records, &initial) else {
         return;
