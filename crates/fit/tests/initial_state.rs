@@ -85,15 +85,13 @@ fn staircase_slice(seed: u64) -> Record {
     recorded(input, 0.265, 0.065, seed)
 }
 
-/// The output-error fit of `rec` from its own detected initial state (which must be `want`)
-/// and the equation-error start.
-fn identify(rec: &Record, want: InitialState) -> FullFit {
-    let (input, priors) = voltage_levels(&rec.t, &rec.voltage, None).unwrap();
+/// The output-error fit of `rec` with its simulation started from `state`, from the
+/// equation-error start.
+fn fit_from(rec: &Record, state: InitialState) -> Result<FullFit, fit::FitError> {
+    let (input, priors) = voltage_levels(&rec.t, &rec.voltage, None)?;
     let records = [excited(rec, &input)];
-    let detected = detect_initial_state(&records[0]).unwrap();
-    assert_eq!(detected.state, want, "{}", detected.reason);
-    let initial = [detected.state];
-    let start = equation_error_start_with_initial_states(&records, &initial).unwrap();
+    let initial = [state];
+    let start = equation_error_start_with_initial_states(&records, &initial)?;
     identify_output_error_with_initial_states(
         &records,
         &[priors],
@@ -102,7 +100,14 @@ fn identify(rec: &Record, want: InitialState) -> FullFit {
         &Effects::none(),
         LmSettings::default(),
     )
-    .unwrap()
+}
+
+/// [`fit_from`] the initial state `rec` shows, which must be `want`.
+fn identify(rec: &Record, want: InitialState) -> FullFit {
+    let (input, _) = voltage_levels(&rec.t, &rec.voltage, None).unwrap();
+    let detected = detect_initial_state(&excited(rec, &input)).unwrap();
+    assert_eq!(detected.state, want, "{}", detected.reason);
+    fit_from(rec, detected.state).unwrap()
 }
 
 /// Per-parameter 95 % misses allowed over the 18 intervals of three seeds: honest intervals
@@ -215,21 +220,7 @@ fn a_slice_from_the_middle_of_a_staircase_identifies_with_a_free_initial_state()
 /// refused or its intervals miss the truth (what the detection prevents).
 #[test]
 fn a_steady_start_fitted_from_rest_is_not_a_result() {
-    let rec = from_steady(SEEDS[0]);
-    let (input, priors) = voltage_levels(&rec.t, &rec.voltage, None).unwrap();
-    let records = [excited(&rec, &input)];
-    let initial = [InitialState::Rest];
-    let Ok(start) = equation_error_start_with_initial_states(&records, &initial) else {
-        return;
-    };
-    let Ok(fit) = identify_output_error_with_initial_states(
-        &records,
-        &[priors],
-        &initial,
-        &start,
-        &Effects::none(),
-        LmSettings::default(),
-    ) else {
+    let Ok(fit) = fit_from(&from_steady(SEEDS[0]), InitialState::Rest) else {
         return;
     };
     let inside = fit.ci95.is_some_and(|ci| {
