@@ -311,6 +311,25 @@ pub struct IdentifyArgs {
     /// Print one JSON object instead of tables.
     #[arg(long)]
     pub json: bool,
+    /// How each record's simulation starts (--record, and step records that do not start at
+    /// rest): `auto` tells from the first samples; `rest`; `steady` (the steady state of the
+    /// first voltage level, Eqs. (4), (5)); `free` (initial current and speed fitted: a slice
+    /// of a longer run).
+    #[arg(long, value_enum, default_value = "auto")]
+    pub initial_state: InitialStateArg,
+}
+
+/// How a record's simulation starts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum InitialStateArg {
+    /// Detected from the record's first samples.
+    Auto,
+    /// At rest: no current, no speed.
+    Rest,
+    /// In the steady state of the first voltage level.
+    Steady,
+    /// Initial current and speed fitted with the motor.
+    Free,
 }
 
 /// Which motor: `paper` (the paper's Sec. 4.1 motor) or a JSON file with keys R, L, k, f, J,

@@ -7,7 +7,7 @@ use motor_model::{
     Adc, Effect, Effects, Input, MeasurementModel, MotorParams, Range, SpeedSource, Trace,
 };
 
-use crate::args::{MeasurementArgs, MethodArg, SpeedFromArg};
+use crate::args::{InitialStateArg, MeasurementArgs, MethodArg, SpeedFromArg};
 use crate::BadInput;
 
 /// `paper` or a JSON file with keys R, L, k, f, J, Ts.
@@ -451,6 +451,16 @@ pub fn measurement(a: &MeasurementArgs, trace: &Trace) -> Result<MeasurementMode
         },
         seed: a.seed,
     })
+}
+
+/// The initial state `--initial-state` forces, `None` for `auto` (detected per record).
+pub fn initial_state(arg: InitialStateArg) -> Option<fit::InitialState> {
+    match arg {
+        InitialStateArg::Auto => None,
+        InitialStateArg::Rest => Some(fit::InitialState::Rest),
+        InitialStateArg::Steady => Some(fit::InitialState::Steady),
+        InitialStateArg::Free => Some(fit::InitialState::Free),
+    }
 }
 
 /// The library's step-pair method for `--method`.

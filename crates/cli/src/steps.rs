@@ -6,12 +6,13 @@ use std::path::Path;
 
 use anyhow::Result;
 use fit::{
-    equation_error_start, identify_output_error_with_inputs, identify_step_pair, judge_clipping,
-    locate_step_with, record_speed, voltage_levels, ClippingVerdict, ExcitedRecord, FullFit,
-    LevelPrior, LmSettings, RecordChannel, StepInputs, StepMethod, StepPairIdentification,
-    StepRecord, StepTest,
+    detect_initial_state, equation_error_start_with_initial_states,
+    identify_output_error_with_initial_states, identify_step_pair, judge_clipping,
+    locate_step_with, record_speed, voltage_input, voltage_levels, ClippingVerdict,
+    DetectedInitialState, ExcitedRecord, FullFit, InitialState, LevelPrior, LmSettings,
+    RecordChannel, StepInputs, StepMethod, StepPairIdentification, StepRecord, StepTest,
 };
-use motor_model::{Input, MotorParams, Record};
+use motor_model::{Effects, Input, MotorParams, Record};
 
 use crate::record_csv::{read_loaded, ColumnMap, Loaded};
 use crate::BadInput;
@@ -35,6 +36,9 @@ pub struct LoadedStep {
     exclude_speed: Option<Vec<bool>>,
     /// What the record leaves unknown about the step (height and instant).
     pub inputs: StepInputs,
+    /// How the whole record starts, from its first samples (`None` where they cannot tell:
+    /// taken as rest, as the step methods assume).
+    pub initial: Option<DetectedInitialState>,
 }
 
 impl LoadedStep {
@@ -104,7 +108,9 @@ pub fn load_step(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedStep
     let loaded = read_loaded(path, map, true)?;
     let masks = check_clipping(&shown, &loaded, quiet)?;
     let label = file_lines(&shown, &loaded.lines);
+    let initial = initial_state_of(&loaded.record);
     let mut step = step_from_record_with(label, loaded.record, loaded.voltage_lsb)?;
+    step.initial = initial;
     step.inputs.current_lsb_a = loaded.current_lsb.unwrap_or(0.0);
     step.path = shown;
     let from = loaded.lines.len() - step.current.len();
@@ -114,6 +120,22 @@ pub fn load_step(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedStep
         step.exclude_speed = masks.speed.map(|m| m[from..].to_vec());
     }
     Ok(step)
+}
+
+/// How a whole record starts ([`fit::detect_initial_state`]), `None` where its first samples
+/// cannot tell.
+fn initial_state_of(rec: &Record) -> Option<DetectedInitialState> {
+    let input = voltage_input(&rec.t, &rec.voltage).ok()?;
+    detect_initial_state(&ExcitedRecord {
+        input: &input,
+        dt: motor_model::mean_period(&rec.t),
+        current: &rec.current,
+        speed: rec.speed.as_deref(),
+        position: rec.position.as_deref(),
+        exclude_current: None,
+        exclude_speed: None,
+    })
+    .ok()
 }
 
 /// Finds the step in a record (named `shown` in errors) and keeps the samples from it on. Speed
@@ -150,6 +172,7 @@ pub fn step_from_record_with(
         exclude_current: None,
         exclude_speed: None,
         inputs: loc.inputs(),
+        initial: None,
     })
 }
 
@@ -263,22 +286,68 @@ pub fn file_lines(shown: &str, lines: &[usize]) -> String {
 }
 
 /// The output-error fit of `loaded` from `start`, or from the equation-error start when none is
-/// given; errors name `label`, and a failed start adds `start_hint`. Returns the start used and
-/// the fit.
+/// given; errors name `label`, and a failed start adds `start_hint`. Each record starts from
+/// the state its first samples show. Returns the start used and the fit.
 pub fn fit_excited(
     loaded: &[LoadedExcited],
     start: Option<MotorParams>,
     label: &str,
     start_hint: &str,
 ) -> Result<(MotorParams, FullFit)> {
+    fit_excited_from(loaded, None, start, label, start_hint).map(|f| (f.start, f.full))
+}
+
+/// An output-error fit with how each record's simulation started.
+pub struct ExcitedFit {
+    /// The start of the fit.
+    pub start: MotorParams,
+    /// The fit.
+    pub full: FullFit,
+    /// Each record's initial state and why: detected from its first samples, or given.
+    pub initial: Vec<DetectedInitialState>,
+}
+
+/// [`fit_excited`] with every record's simulation started from `initial` if given
+/// (`--initial-state`), else from the state its first samples show
+/// ([`fit::detect_initial_state`]).
+pub fn fit_excited_from(
+    loaded: &[LoadedExcited],
+    initial: Option<InitialState>,
+    start: Option<MotorParams>,
+    label: &str,
+    start_hint: &str,
+) -> Result<ExcitedFit> {
     let records: Vec<ExcitedRecord> = loaded.iter().map(LoadedExcited::excited).collect();
+    let chosen = loaded
+        .iter()
+        .zip(&records)
+        .map(|(l, r)| match initial {
+            Some(state) => Ok(DetectedInitialState {
+                state,
+                reason: format!("given (--initial-state {})", state.name()),
+            }),
+            None => detect_initial_state(r).map_err(|e| BadInput(format!("{}: {e}", l.label))),
+        })
+        .collect::<std::result::Result<Vec<_>, _>>()?;
+    let states: Vec<InitialState> = chosen.iter().map(|c| c.state).collect();
     let start = match start {
         Some(s) => s,
-        None => equation_error_start(&records)
+        None => equation_error_start_with_initial_states(&records, &states)
             .map_err(|e| BadInput(format!("{label}: {e}{start_hint}")))?,
     };
     let priors: Vec<Vec<LevelPrior>> = loaded.iter().map(|l| l.priors.clone()).collect();
-    let full = identify_output_error_with_inputs(&records, &priors, &start, LmSettings::default())
-        .map_err(|e| BadInput(format!("{label}: {e}")))?;
-    Ok((start, full))
+    let full = identify_output_error_with_initial_states(
+        &records,
+        &priors,
+        &states,
+        &start,
+        &Effects::none(),
+        LmSettings::default(),
+    )
+    .map_err(|e| BadInput(format!("{label}: {e}")))?;
+    Ok(ExcitedFit {
+        start,
+        full,
+        initial: chosen,
+    })
 }

@@ -5,7 +5,7 @@ mod common;
 
 use common::{
     assert_truth_in_intervals, interval, motorid, scratch, simulate_to, small_servo_steps, stderr,
-    stdout, LOGGER, PAPER_TRUTH as TRUTH,
+    stdout, LOGGER, PAPER_TRUTH as TRUTH, SMALL_SERVO_TRUTH,
 };
 use serde_json::Value;
 
@@ -249,15 +249,5 @@ fn small_servo_steps_by_output_error_start_from_the_pooled_torque_equation() {
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
     let report: Value = serde_json::from_str(&stdout(&out)).unwrap();
-    assert_truth_in_intervals(
-        &report,
-        &[
-            ("R", 2.0),
-            ("L", 0.002),
-            ("k", 0.05),
-            ("f", 0.0004),
-            ("J", 2e-5),
-            ("Ts", 0.004),
-        ],
-    );
+    assert_truth_in_intervals(&report, &SMALL_SERVO_TRUTH);
 }

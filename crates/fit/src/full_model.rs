@@ -12,6 +12,7 @@ use motor_model::{Dual, Effects, MotorParams, MotorState, Real, StepResponse};
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::FitError;
+use crate::initial_state::FittedInitialState;
 use crate::input_uncertainty::{
     fit_with_inputs, settled_current, Nuisance, NuisanceProblem, StepInputs,
 };
@@ -138,6 +139,10 @@ pub struct FullFit {
     pub refusal: Option<Refusal>,
     /// Final weighted cost `½ Σ r²`.
     pub cost: f64,
+    /// Each record's initial state as fitted, in record order, for an output-error fit
+    /// ([`crate::identify_output_error_with_initial_states`]); empty for the step fits (every
+    /// step starts at rest).
+    pub initial_states: Vec<FittedInitialState>,
     /// The solution in the fit's coordinates (`θ`, see `parameters.rs`).
     pub(crate) theta: Vec<f64>,
     /// Covariance of `θ` behind the intervals, if any.
@@ -697,6 +702,7 @@ pub(crate) fn fit_weighted<P: WeightedProblem>(
         termination: report.termination,
         refusal: None,
         cost: report.normal.cost,
+        initial_states: Vec::new(),
         theta,
         theta_covariance: None,
     };

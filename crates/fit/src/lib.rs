@@ -8,6 +8,9 @@
 //! - [`identify_full_with_inputs`], [`identify_output_error_with_inputs`]: the step heights,
 //!   levels and instants as measured inputs whose uncertainty enters the intervals
 //!   ([`estimate_level`], [`StepInputs`], [`LevelPrior`]).
+//! - [`identify_output_error_with_initial_states`]: records that do not start at rest, each
+//!   started at rest, in the steady state of its first level (Eqs. (4), (5)) or from a free
+//!   initial current and speed ([`InitialState`], [`detect_initial_state`]).
 //! - [`identify_output_error_with_effects`]: the motor's six parameters and those of a set of
 //!   unmodelled effects (SPEC section 5) in one output-error fit, each named with its unit and
 //!   interval ([`EffectEstimate`]); every fit returns its fitted traces ([`FittedChannel`]).
@@ -39,6 +42,7 @@ pub mod diagnose;
 mod error;
 mod feedforward;
 mod full_model;
+mod initial_state;
 mod input_uncertainty;
 mod lm;
 mod mechanical;
@@ -67,6 +71,9 @@ pub use full_model::{
     identify_full, identify_full_with_inputs, noise_std, Channel, ChannelQuality, FittedChannel,
     FullFit, StepTest, PARAM_NAMES, PARAM_UNITS,
 };
+pub use initial_state::{
+    detect_initial_state, DetectedInitialState, FittedInitialState, InitialState,
+};
 pub use input_uncertainty::{
     estimate_level, quantisation_bias_variance, LevelEstimate, LevelPrior, StepInputs, VoltageScale,
 };
@@ -79,8 +86,9 @@ pub use mechanical::{
 };
 pub use model33::{fit_33, Fit33, Params33, Record33};
 pub use output_error::{
-    electrical_equation, equation_error_start, identify_output_error,
-    identify_output_error_with_effects, identify_output_error_with_inputs,
+    electrical_equation, equation_error_start, equation_error_start_with_initial_states,
+    identify_output_error, identify_output_error_with_effects,
+    identify_output_error_with_initial_states, identify_output_error_with_inputs,
     identify_output_error_with_inputs_and_effects, predict_output_error, voltage_input,
     voltage_levels, ExcitedRecord,
 };

@@ -9,18 +9,23 @@
 //! `θ = ln p`; the Jacobian is by forward differences in θ (step 1e-6) on a simulation whose
 //! RK4 step is fixed for the whole fit, so that the simulated output is a smooth function of θ.
 //!
-//! Every record must start with the motor at rest and no current (pre-trigger samples, or the
-//! first change of voltage at the first sample): the simulation starts from rest.
+//! Each record's simulation starts at its first sample from the state the record shows
+//! ([`crate::InitialState`], [`crate::detect_initial_state`]): at rest (pre-trigger samples, or
+//! the first change of voltage at the first sample), in the steady state of its first level
+//! (Eqs. (4), (5) of the fitted motor: no parameter of its own), or free (a slice of a longer
+//! run: its initial current and speed are fitted with the motor, appended to θ as they are,
+//! and the motor's intervals are the marginal ones).
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use motor_model::{central_difference, Effects, Input, MotorParams, Simulator};
+use motor_model::{central_difference, steady_state, Effects, Input, MotorParams, Simulator};
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::FitError;
 use crate::full_model::{
     noise_std, quality_from_sums, Channel, ChannelQuality, FittedChannel, FullFit, WeightedProblem,
 };
+use crate::initial_state::{FittedInitialState, InitialState};
 use crate::input_uncertainty::{
     estimate_level, fit_with_inputs, LevelEstimate, LevelPrior, Nuisance, NuisanceProblem,
     VoltageScale,
@@ -195,6 +200,10 @@ struct OeRecord {
     dt: f64,
     n: usize,
     channels: Vec<OeChannel>,
+    /// How its simulation starts.
+    initial: InitialState,
+    /// Index in θ of its free initial current (the speed follows), for [`InitialState::Free`].
+    free_at: Option<usize>,
 }
 
 struct OeProblem {
@@ -249,6 +258,99 @@ impl OeProblem {
             max_step_bits,
             speed_bound,
         })
+    }
+
+    /// Starts record `k`'s simulation from `initial[k]` (all at rest when `initial` is empty),
+    /// appending the free initial states to θ. A steady start is the nominal model's
+    /// (Eqs. (4), (5)): refused with `effects` on.
+    fn set_initial_states(
+        &mut self,
+        initial: &[InitialState],
+        effects: &Effects,
+    ) -> Result<(), FitError> {
+        if initial.is_empty() {
+            return Ok(());
+        }
+        if initial.len() != self.records.len() {
+            return Err(bad(
+                "initial states",
+                format!(
+                    "{} for {} records: give one per record, or none",
+                    initial.len(),
+                    self.records.len()
+                ),
+            ));
+        }
+        let mut next = self.parameters.named();
+        for (k, (rec, &state)) in self.records.iter_mut().zip(initial).enumerate() {
+            if state == InitialState::Steady && !effects.is_nominal() {
+                return Err(bad(
+                    format!("record {}", k + 1),
+                    "a steady initial state is the nominal motor's (Eqs. (4), (5)); with effects on, \
+                     start it free"
+                        .into(),
+                ));
+            }
+            rec.initial = state;
+            if state == InitialState::Free {
+                rec.free_at = Some(next);
+                next += 2;
+            }
+        }
+        let free = next - self.parameters.named();
+        self.parameters = self.parameters.clone().with_free_states(free);
+        Ok(())
+    }
+
+    /// θ of the named parameters `named` with the free initial states appended, each at the
+    /// record's first measured current and speed.
+    fn with_state_guesses(&self, mut named: Vec<f64>) -> Vec<f64> {
+        for rec in self.records.iter().filter(|r| r.free_at.is_some()) {
+            let first = |current: bool| {
+                rec.channels
+                    .iter()
+                    .filter(|c| (c.kind == Channel::Current) == current)
+                    .find_map(|c| c.data.first().copied())
+                    .unwrap_or(0.0)
+            };
+            named.push(first(true));
+            named.push(first(false));
+        }
+        named
+    }
+
+    /// The current \[A\] and speed \[rad/s\] record `rec` starts at for `motor` and θ.
+    fn start_of(rec: &OeRecord, motor: &MotorParams, theta: &[f64]) -> Option<(f64, f64)> {
+        match rec.initial {
+            InitialState::Steady => {
+                let s = steady_state(motor, rec.input.volts_at(0.0));
+                Some((s.current_a, s.speed_rad_s))
+            }
+            InitialState::Free => {
+                let k = rec.free_at?;
+                Some((*theta.get(k)?, *theta.get(k + 1)?))
+            }
+            _ => Some((0.0, 0.0)),
+        }
+    }
+
+    /// Each record's initial state at the solution θ.
+    fn fitted_initial_states(&self, theta: &[f64]) -> Vec<FittedInitialState> {
+        let Some((motor, _)) = self.parameters.decode(theta) else {
+            return Vec::new();
+        };
+        self.records
+            .iter()
+            .map(|rec| {
+                let (current_a, speed_rad_s) =
+                    Self::start_of(rec, &motor, theta).unwrap_or((f64::NAN, f64::NAN));
+                FittedInitialState {
+                    state: rec.initial,
+                    current_a,
+                    speed_rad_s,
+                }
+            })
+            .collect()
     }
 
     /// The RK4 step \[s\] in use.
@@ -312,9 +414,11 @@ impl OeProblem {
         self.within_work_bound(&motor, &effects)?;
         let mut out = Vec::with_capacity(self.records.len());
         for rec in &self.records {
+            let (i0, w0) = Self::start_of(rec, &motor, theta)?;
             let sim = self
                 .simulator(motor, effects, rec.input.clone())
                 .and_then(|s| s.with_max_step(self.max_step_s()))
+                .and_then(|s| s.with_initial_state(i0, w0))
                 .ok()?;
             let rate = 1.0 / rec.dt;
             // n samples: t = 0 … (n − 1) dt, half a period of slack against rounding.
@@ -591,6 +695,8 @@ fn prepare(k: usize, rec: &ExcitedRecord<'_>) -> Result<OeRecord, FitError> {
         (None, None) => {}
     }
     Ok(OeRecord {
+        initial: InitialState::Rest,
+        free_at: None,
         priors: Vec::new(),
         input: rec.input.clone(),
         dt: rec.dt,
@@ -656,6 +762,24 @@ pub fn identify_output_error_with_inputs_and_effects(
     effects: &Effects,
     settings: LmSettings,
 ) -> Result<FullFit, FitError> {
+    identify_output_error_with_initial_states(records, priors, &[], start, effects, settings)
+}
+
+/// [`identify_output_error_with_inputs_and_effects`] with record `k`'s simulation started from
+/// `initial[k]` (all at rest when `initial` is empty; [`crate::detect_initial_state`] tells
+/// which a record shows): at rest, in the steady state of its first level (Eqs. (4), (5) of
+/// the motor being fitted; nominal model only), or free (its initial current \[A\] and speed
+/// \[rad/s\] fitted with the motor, from its first samples; the motor's intervals are the
+/// marginal ones, with that uncertainty in them). [`FullFit::initial_states`] gives each
+/// record's initial state as fitted.
+pub fn identify_output_error_with_initial_states(
+    records: &[ExcitedRecord<'_>],
+    priors: &[Vec<LevelPrior>],
+    initial: &[InitialState],
+    start: &MotorParams,
+    effects: &Effects,
+    settings: LmSettings,
+) -> Result<FullFit, FitError> {
     if !priors.is_empty() && priors.len() != records.len() {
         return Err(bad(
             "level priors",
@@ -670,7 +794,8 @@ pub fn identify_output_error_with_inputs_and_effects(
         return Err(bad("records", "no record given".into()));
     }
     let mut problem = OeProblem::new(records, effects, f64::INFINITY)?;
-    let theta0 = problem.parameters.encode(start, effects)?;
+    problem.set_initial_states(initial, effects)?;
+    let theta0 = problem.with_state_guesses(problem.parameters.encode(start, effects)?);
     let h = problem
         .step_for(start, effects)
         .ok_or_else(|| bad("start parameters", "not simulable".into()))?;
@@ -719,7 +844,9 @@ pub fn identify_output_error_with_inputs_and_effects(
             .map(|((v, t), q)| (*v, *t, *q))
             .collect();
     }
-    fit_with_inputs(&mut problem, &theta0, settings)
+    let mut fit = fit_with_inputs(&mut problem, &theta0, settings)?;
+    fit.initial_states = problem.fitted_initial_states(&fit.theta);
+    Ok(fit)
 }
 
 /// Relative step of the central difference in a level.
@@ -822,7 +949,18 @@ const START_CUTOFFS: [f64; 4] = [0.1, 0.02, 0.004, 0.0008];
 /// simulation fits the records best (output-error cost) is returned. Values the records cannot
 /// resolve (an L below one sample, no friction seen) are replaced by small positive ones.
 pub fn equation_error_start(records: &[ExcitedRecord<'_>]) -> Result<MotorParams, FitError> {
-    let problem = OeProblem::new(records, &Effects::none(), f64::INFINITY)?;
+    equation_error_start_with_initial_states(records, &[])
+}
+
+/// [`equation_error_start`] for records whose simulations start from `initial` (as in
+/// [`identify_output_error_with_initial_states`]): the cut-off is chosen on the output-error
+/// cost of those simulations, free states at the records' first samples.
+pub fn equation_error_start_with_initial_states(
+    records: &[ExcitedRecord<'_>],
+    initial: &[InitialState],
+) -> Result<MotorParams, FitError> {
+    let mut problem = OeProblem::new(records, &Effects::none(), f64::INFINITY)?;
+    problem.set_initial_states(initial, &Effects::none())?;
     let mut best: Option<(f64, MotorParams)> = None;
     let mut first_error = None;
     for fraction in START_CUTOFFS {
@@ -838,7 +976,8 @@ pub fn equation_error_start(records: &[ExcitedRecord<'_>]) -> Result<MotorParams
                     ));
                     continue;
                 }
-                let theta: Vec<f64> = start.values().iter().map(|v| v.ln()).collect();
+                let theta =
+                    problem.with_state_guesses(start.values().iter().map(|v| v.ln()).collect());
                 debug_assert_eq!(theta.len(), problem.parameters.len());
                 let cost = problem.cost(&theta).unwrap_or(f64::INFINITY);
                 if best.as_ref().is_none_or(|(c, _)| cost < *c) {

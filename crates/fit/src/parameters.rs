@@ -48,6 +48,8 @@ pub(crate) struct Parameters {
     /// The effects fitted, with the values of their parameters that are not fitted.
     effects: Effects,
     slots: Vec<(EffectKind, &'static ParamSpec)>,
+    /// Number of free initial-state coordinates at the end of θ (not motor nor effect).
+    free_states: usize,
 }
 
 /// Intervals of every parameter in SI units, in θ order.
@@ -68,11 +70,23 @@ impl Parameters {
         Parameters {
             effects: *effects,
             slots: effects.fitted_slots(),
+            free_states: 0,
         }
+    }
+
+    /// The same parameters with `n` free initial-state coordinates appended to θ.
+    pub fn with_free_states(mut self, n: usize) -> Self {
+        self.free_states = n;
+        self
     }
 
     /// Length of θ.
     pub fn len(&self) -> usize {
+        self.named() + self.free_states
+    }
+
+    /// Number of named parameters (the motor's and the effects'), at the head of θ.
+    pub fn named(&self) -> usize {
         MOTOR + self.slots.len()
     }
 
@@ -126,7 +140,7 @@ impl Parameters {
         let values: Vec<f64> = self
             .slots
             .iter()
-            .zip(&theta[MOTOR..])
+            .zip(&theta[MOTOR..self.named()])
             .map(|((_, spec), &t)| spec.from_unconstrained(t, &motor))
             .collect();
         let effects = self.effects.with_fitted_values(&values).ok()?;
@@ -134,7 +148,7 @@ impl Parameters {
         Some((motor, effects))
     }
 
-    /// The values in SI units at θ, in θ order.
+    /// The named values in SI units at θ, in θ order (the free initial states left out).
     pub fn values(&self, theta: &[f64]) -> Option<Vec<f64>> {
         let (motor, effects) = self.decode(theta)?;
         let mut v = motor.values().to_vec();
@@ -142,11 +156,12 @@ impl Parameters {
         Some(v)
     }
 
-    /// `∂values/∂θ` at θ: the diagonal `dv/dθ` of each transform, and for a parameter
-    /// carried as an excess over Ts ([`Domain::AboveCoulomb`]) `∂v/∂(ln Ts) = Ts`.
+    /// `∂values/∂θ` at θ (named values by the named head of θ): the diagonal `dv/dθ` of each
+    /// transform, and for a parameter carried as an excess over Ts ([`Domain::AboveCoulomb`])
+    /// `∂v/∂(ln Ts) = Ts`.
     pub fn value_jacobian(&self, theta: &[f64]) -> Option<DMatrix<f64>> {
         let v = self.values(theta)?;
-        let p = self.len();
+        let p = self.named();
         let mut d = DMatrix::zeros(p, p);
         for i in 0..MOTOR {
             d[(i, i)] = v[i];
@@ -162,7 +177,9 @@ impl Parameters {
     }
 
     /// Standard errors, Student-t 95 % intervals (`dof` degrees of freedom) and correlations
-    /// in SI units from the covariance of θ, by the delta method `D Cov(θ) Dᵀ`.
+    /// in SI units of the named parameters from the covariance of θ, by the delta method
+    /// `D Cov(θ) Dᵀ` on its named block (the marginal covariance: free initial states profiled
+    /// out).
     pub fn intervals(
         &self,
         theta: &[f64],
@@ -171,7 +188,11 @@ impl Parameters {
     ) -> Option<Intervals> {
         let v = self.values(theta)?;
         let d = self.value_jacobian(theta)?;
-        let cov = &d * cov_theta * d.transpose();
+        let q = self.named();
+        if cov_theta.nrows() < q || cov_theta.ncols() < q {
+            return None;
+        }
+        let cov = &d * cov_theta.view((0, 0), (q, q)) * d.transpose();
         // Standard errors and correlations as every other fit here reports them.
         let u = from_covariance(cov, dof.max(1), f64::NAN)?;
         let ci95 = v

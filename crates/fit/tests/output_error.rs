@@ -1,5 +1,9 @@
 //! Output-error identification on records of arbitrary voltage waveforms.
 
+mod common;
+
+use common::excited;
+
 use fit::{
     equation_error_start, identify_output_error, voltage_input, ExcitedRecord, LmSettings,
     PARAM_NAMES,
@@ -17,18 +21,6 @@ fn logger(trace: &motor_model::Trace, seed: u64) -> Record {
 /// A staircase with a reversal, a coast to standstill and a low-voltage breakaway.
 fn staircase() -> Input {
     Input::piecewise(&[(0.5, 40.0), (40.5, -20.0), (80.5, 0.0), (100.5, 2.5)]).unwrap()
-}
-
-fn excited<'a>(rec: &'a Record, input: &'a Input) -> ExcitedRecord<'a> {
-    ExcitedRecord {
-        input,
-        dt: rec.t[1] - rec.t[0],
-        current: &rec.current,
-        speed: None,
-        position: rec.position.as_deref(),
-        exclude_current: None,
-        exclude_speed: None,
-    }
 }
 
 /// Acceptance 2 of the real-world-records issue, in the library: a noisy staircase record of

@@ -203,3 +203,55 @@ fn a_step_on_a_sample_instant_is_applied_at_its_instant() {
         "largest current error {worst:e} A"
     );
 }
+
+/// A simulation started at the steady state of its constant voltage (Eqs. (4), (5)) stays
+/// there: moving above breakaway, stuck with `I = E/R` below it; a rotor started moving at 0 V
+/// coasts and sticks for good.
+#[test]
+fn a_simulation_started_at_its_steady_state_stays_there() {
+    let p = MotorParams::paper();
+    for volts in [40.0, -20.0, 0.1] {
+        let s = motor_model::steady_state(&p, volts);
+        let trace = Simulator::new(
+            p,
+            Effects::none(),
+            Input::piecewise(&[(0.0, volts)]).unwrap(),
+        )
+        .unwrap()
+        .with_initial_state(s.current_a, s.speed_rad_s)
+        .unwrap()
+        .run(5.0, 100.0)
+        .unwrap();
+        for i in 0..trace.t.len() {
+            assert!(
+                (trace.current[i] - s.current_a).abs() < 1e-9 * s.current_a.abs().max(1.0),
+                "{volts} V, sample {i}: {} A vs {} A",
+                trace.current[i],
+                s.current_a
+            );
+            assert!(
+                (trace.speed[i] - s.speed_rad_s).abs() < 1e-9 * s.speed_rad_s.abs().max(1.0),
+                "{volts} V, sample {i}: {} rad/s vs {} rad/s",
+                trace.speed[i],
+                s.speed_rad_s
+            );
+            assert_eq!(trace.stuck[i], !s.moving, "{volts} V, sample {i}");
+        }
+    }
+    let coast = Simulator::new(p, Effects::none(), Input::piecewise(&[(0.0, 0.0)]).unwrap())
+        .unwrap()
+        .with_initial_state(0.0, 50.0)
+        .unwrap()
+        .run(60.0, 100.0)
+        .unwrap();
+    assert!(!coast.stuck[0] && coast.speed[1] < 50.0 && coast.speed[1] > 0.0);
+    let last = coast.t.len() - 1;
+    assert!(coast.stuck[last] && coast.speed[last] == 0.0);
+    assert!(coast.speed.iter().all(|w| *w >= 0.0));
+    assert!(
+        Simulator::new(p, Effects::none(), Input::piecewise(&[(0.0, 0.0)]).unwrap())
+            .unwrap()
+            .with_initial_state(f64::NAN, 0.0)
+            .is_err()
+    );
+}

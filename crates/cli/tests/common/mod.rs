@@ -94,6 +94,16 @@ pub const PAPER_TRUTH: [(&str, f64); 6] = [
     ("Ts", 0.03),
 ];
 
+/// `fixtures/motors/small_servo.json` by parameter name: R, L, k, f, J, Ts (SI units).
+pub const SMALL_SERVO_TRUTH: [(&str, f64); 6] = [
+    ("R", 2.0),
+    ("L", 0.002),
+    ("k", 0.05),
+    ("f", 0.0004),
+    ("J", 2e-5),
+    ("Ts", 0.004),
+];
+
 /// The paper's logger as `simulate` options: 10-bit ADC, 1 LSB noise, 2000-count encoder,
 /// speed from the encoder.
 pub const LOGGER: [&str; 8] = [

@@ -112,6 +112,8 @@ pub struct Simulator {
     /// Whether the step may shorten with the state (cogging at the current speed): not once
     /// a fit has fixed the step or a speed bound is given.
     state_dependent_step: bool,
+    /// Armature current \[A\] and speed \[rad/s\] at `t = 0` (rest by default).
+    initial: (f64, f64),
 }
 
 impl Simulator {
@@ -158,6 +160,7 @@ impl Simulator {
             static_friction_nm,
             max_step_s: f64::INFINITY,
             state_dependent_step: true,
+            initial: (0.0, 0.0),
         };
         sim.max_step_s = sim.fastest_time_constant() / STEPS_PER_TIME_CONSTANT;
         Ok(sim)
@@ -203,7 +206,37 @@ impl Simulator {
         Ok(self)
     }
 
-    /// Simulates `duration_s` \[s\] from rest, sampled at `rate_hz` \[Hz\] (`t = 0, 1/rate, …`).
+    /// The same simulator started at `t = 0` with armature current `current_a` \[A\] and speed
+    /// `speed_rad_s` \[rad/s\] instead of at rest (the angle starts at 0; a lagging current
+    /// sensor reads `current_a`, a winding starts at ambient temperature). A rotor started
+    /// moving is in the moving mode in the direction of its speed, and sticks only where its
+    /// speed next crosses 0 with the torque below the static friction; a rotor started at
+    /// speed 0 is stuck while `|k I| ≤ Ts` (the steady state of a voltage below breakaway,
+    /// Eq. (1)), else moving towards its torque. Use [`crate::steady_state`] for the state a
+    /// constant voltage settles at (Eqs. (4), (5)).
+    pub fn with_initial_state(
+        mut self,
+        current_a: f64,
+        speed_rad_s: f64,
+    ) -> Result<Self, ModelError> {
+        for (name, value) in [
+            ("initial current", current_a),
+            ("initial speed", speed_rad_s),
+        ] {
+            if !value.is_finite() {
+                return Err(ModelError::InvalidSetting {
+                    name: name.into(),
+                    value,
+                    expected: "a finite number",
+                });
+            }
+        }
+        self.initial = (current_a, speed_rad_s);
+        Ok(self)
+    }
+
+    /// Simulates `duration_s` \[s\] from rest (or the state of
+    /// [`Simulator::with_initial_state`]), sampled at `rate_hz` \[Hz\] (`t = 0, 1/rate, …`).
     pub fn run(&self, duration_s: f64, rate_hz: f64) -> Result<Trace, ModelError> {
         let (n, dt) = sample_grid(duration_s, rate_hz)?;
         Ok(match self.n_states {
@@ -227,10 +260,18 @@ impl Simulator {
             position: Vec::with_capacity(n),
             stuck: Vec::with_capacity(n),
         };
-        let mut x: State<N> = [0.0; N];
-        let mut mode = Mode::Stuck;
-        let mut t = 0.0;
         let sensor = self.sensor.filter(|&s| s < N).unwrap_or(I_IDX);
+        let mut x: State<N> = [0.0; N];
+        let (i0, w0) = self.initial;
+        x[I_IDX] = i0;
+        x[sensor] = i0;
+        x[W_IDX] = w0;
+        let mut mode = if w0 == 0.0 {
+            self.mode_at_rest(&x)
+        } else {
+            Mode::Moving(w0.signum())
+        };
+        let mut t = 0.0;
         for i in 0..n {
             let t_i = i as f64 * dt;
             // Integrate to t_i, splitting at every jump of E(t) on the way.

@@ -15,7 +15,9 @@ use serde_json::{json, Value};
 use crate::args::{AxisArg, DriveArg, IdentifyArgs};
 use crate::record_csv::{read_loaded, read_mapped, ColumnMap};
 use crate::settings;
-use crate::steps::{file_lines, fit_excited, identify_pair, in_order, load_excited, load_step};
+use crate::steps::{
+    file_lines, fit_excited_from, identify_pair, in_order, load_excited, load_step,
+};
 use crate::{BadInput, NotConverged};
 
 /// `x` with 7 significant digits, in plain or scientific notation as suits its size.
@@ -552,6 +554,15 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
         load_step(low, &map, a.quiet)?,
     );
     let (hv, lv, swapped) = in_order(hv, lv);
+    if let Some(why) = not_from_rest(a, [&hv, &lv]) {
+        let note = format!(
+            "the step methods need records that start at rest ({why}): both records are fitted whole by output error"
+        );
+        if !a.quiet && !a.json {
+            eprintln!("note: {note}");
+        }
+        return run_output_error(a, &[high.clone(), low.clone()], Some(&note));
+    }
     if !a.quiet {
         if let Some(note) = swapped {
             eprintln!("note: {note}");
@@ -598,11 +609,41 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
     converged(full)
 }
 
+/// Why a step pair cannot be fitted by the step methods, which start every step from rest:
+/// `--initial-state steady|free`, or a record whose first samples show a running motor (unless
+/// `--initial-state rest`); `None` for a pair from rest.
+fn not_from_rest(a: &IdentifyArgs, steps: [&crate::steps::LoadedStep; 2]) -> Option<String> {
+    match settings::initial_state(a.initial_state) {
+        Some(fit::InitialState::Rest) => None,
+        Some(state) => Some(format!("--initial-state {}", state.name())),
+        None => {
+            let moving: Vec<String> = steps
+                .iter()
+                .filter_map(|s| {
+                    let d = s.initial.as_ref()?;
+                    (d.state != fit::InitialState::Rest)
+                        .then(|| format!("{}: {}", s.label, d.reason))
+                })
+                .collect();
+            (!moving.is_empty()).then(|| moving.join("; "))
+        }
+    }
+}
+
 /// `--record A.csv --record B.csv ...`: all six parameters by output error.
 fn run_records(a: &IdentifyArgs) -> Result<()> {
+    run_output_error(a, &a.record, None)
+}
+
+/// All six parameters by output error on the records at `paths`, each started from the state
+/// `--initial-state` gives or its first samples show; `note` says why a step pair came here.
+fn run_output_error(
+    a: &IdentifyArgs,
+    paths: &[std::path::PathBuf],
+    note: Option<&str>,
+) -> Result<()> {
     let map = column_map(a)?;
-    let loaded = a
-        .record
+    let loaded = paths
         .iter()
         .map(|p| load_excited(p, &map, a.quiet))
         .collect::<Result<Vec<_>>>()?;
@@ -623,12 +664,24 @@ fn run_records(a: &IdentifyArgs) -> Result<()> {
             loaded.len()
         );
     }
-    let (start, full) = fit_excited(
+    let fitted = fit_excited_from(
         &loaded,
+        settings::initial_state(a.initial_state),
         given,
         &all,
         " (give a start with --start FILE.json)",
     )?;
+    let (start, full) = (fitted.start, fitted.full);
+    let initial: Vec<(
+        &str,
+        &fit::DetectedInitialState,
+        Option<&fit::FittedInitialState>,
+    )> = files
+        .iter()
+        .zip(&fitted.initial)
+        .enumerate()
+        .map(|(k, (file, chosen))| (*file, chosen, full.initial_states.get(k)))
+        .collect();
     if long {
         eprintln!(
             "done in {:.1} s ({} iterations)",
@@ -646,10 +699,45 @@ fn run_records(a: &IdentifyArgs) -> Result<()> {
         if let Some(obj) = report.as_object_mut() {
             obj.remove("paper_method");
             obj.insert("start".into(), serde_json::to_value(start)?);
+            obj.insert(
+                "initial_state".into(),
+                initial
+                    .iter()
+                    .map(|(file, chosen, fitted)| {
+                        json!({
+                            "record": file,
+                            "state": chosen.state.name(),
+                            "reason": chosen.reason,
+                            "current": fitted.map(|f| json!({"value": f.current_a, "unit": "A"})),
+                            "speed": fitted.map(|f| json!({"value": f.speed_rad_s, "unit": "rad/s"})),
+                        })
+                    })
+                    .collect(),
+            );
+            if let Some(note) = note {
+                obj.insert("note".into(), note.into());
+            }
         }
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         print_table("output_error", Err(""), Some(&full), &files, None);
+        for (file, chosen, fitted) in &initial {
+            let at = fitted.map_or(String::new(), |f| {
+                format!(
+                    "; fitted start: current {} A, speed {} rad/s",
+                    sig(f.current_a),
+                    sig(f.speed_rad_s)
+                )
+            });
+            println!(
+                "initial state of {file}: {} — {}{at}",
+                chosen.state.name(),
+                chosen.reason
+            );
+        }
+        if let Some(note) = note {
+            println!("note: {note}");
+        }
     }
     if let Some(dir) = &a.plot {
         crate::figures::fit_figures(dir, &loaded, &full.params, a.quiet)?;
