@@ -117,24 +117,21 @@ fn assert_voltage_speed_truth(what: &str, files: &[&std::path::Path]) {
     }
 }
 
-/// A staircase from rest (2, 6, 3, 9 V), 0.7 s at 2 kHz.
-fn staircase(dir: &std::path::Path, tacho: bool) -> std::path::PathBuf {
-    let full = dir.join(format!("stairs_{tacho}_full.csv"));
-    let mut args = vec![
-        "--motor",
-        SERVO,
-        "--levels",
-        "0.05:2,0.2:6,0.35:3,0.5:9",
-        "--duration",
-        "0.7",
-        "--rate",
-        "2000",
-        "--quiet",
-    ];
+/// `input` (simulate's options) on the servo through the logger, written into `dir` as
+/// `name.csv` without its current (and, with a tachometer, without the exact angle the
+/// simulator writes beside it: not a measurement here).
+fn servo_record(
+    dir: &std::path::Path,
+    name: &str,
+    input: &[&str],
+    tacho: bool,
+) -> std::path::PathBuf {
+    let full = dir.join(format!("{name}_{tacho}_full.csv"));
+    let mut args = vec!["--motor", SERVO, "--quiet"];
+    args.extend(input);
     args.extend(logger(tacho));
     simulate_to(&full, &args);
-    let path = dir.join(format!("stairs_{tacho}.csv"));
-    // With a tachometer the simulator also writes the exact angle: not a measurement here.
+    let path = dir.join(format!("{name}_{tacho}.csv"));
     let drop: &[&str] = if tacho {
         &["current", "position"]
     } else {
@@ -142,6 +139,19 @@ fn staircase(dir: &std::path::Path, tacho: bool) -> std::path::PathBuf {
     };
     without(&full, &path, drop, 0.0);
     path
+}
+
+/// A staircase from rest (2, 6, 3, 9 V), 0.7 s at 2 kHz.
+fn staircase(dir: &std::path::Path, tacho: bool) -> std::path::PathBuf {
+    let input = [
+        "--levels",
+        "0.05:2,0.2:6,0.35:3,0.5:9",
+        "--duration",
+        "0.7",
+        "--rate",
+        "2000",
+    ];
+    servo_record(dir, "stairs", &input, tacho)
 }
 
 #[test]
@@ -169,10 +179,7 @@ fn a_staircase_without_current_gives_ks_kv_ka_and_j_f_ts_with_r_and_k() {
 
 /// A PRBS of ±8 V, 40 ms bits, 0.6 s at 2 kHz.
 fn prbs(dir: &std::path::Path, tacho: bool) -> std::path::PathBuf {
-    let full = dir.join(format!("prbs_{tacho}_full.csv"));
-    let mut args = vec![
-        "--motor",
-        SERVO,
+    let input = [
         "--prbs",
         "8,0.04,1",
         "--step-at",
@@ -181,18 +188,8 @@ fn prbs(dir: &std::path::Path, tacho: bool) -> std::path::PathBuf {
         "0.6",
         "--rate",
         "2000",
-        "--quiet",
     ];
-    args.extend(logger(tacho));
-    simulate_to(&full, &args);
-    let path = dir.join(format!("prbs_{tacho}.csv"));
-    let drop: &[&str] = if tacho {
-        &["current", "position"]
-    } else {
-        &["current"]
-    };
-    without(&full, &path, drop, 0.0);
-    path
+    servo_record(dir, "prbs", &input, tacho)
 }
 
 #[test]

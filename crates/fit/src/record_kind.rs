@@ -318,7 +318,7 @@ pub fn current_adc_steps(current: &[f64], lsb_a: Option<f64>) -> f64 {
             (lo.min(*v), hi.max(*v))
         });
     let range = hi - lo;
-    if !(range > 0.0) {
+    if range.is_nan() || range <= 0.0 {
         return f64::INFINITY;
     }
     let lsb = match lsb_a {

@@ -10,7 +10,7 @@ use serde_json::{json, Value};
 use crate::args::IdentifyArgs;
 use crate::{BadInput, NotConverged};
 
-use super::sig;
+use super::{channels_json, print_channels, sig};
 
 /// The option that gives a known constant.
 fn option(c: KnownConstant) -> &'static str {
@@ -172,10 +172,7 @@ pub fn report(
                 "termination": fit.termination.text(),
                 "converged": fit.termination.converged(),
                 "iterations": fit.iterations,
-                "channels": fit.quality.iter().map(|q| json!({
-                    "record": files.get(q.test), "channel": q.channel.name(), "rms_residual": q.rms_residual,
-                    "nrmse_fit_percent": q.nrmse_fit_percent, "noise_std": q.noise_std,
-                })).collect::<Vec<_>>(),
+                "channels": channels_json(&fit.quality, files),
             },
         });
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -218,16 +215,7 @@ pub fn report(
             fit.termination.text(),
             fit.iterations
         );
-        for q in &fit.quality {
-            println!(
-                "  {} {}: residual RMS {:.3e}, fit {:.3} %, noise {:.3e}",
-                files.get(q.test).copied().unwrap_or("?"),
-                q.channel.name(),
-                q.rms_residual,
-                q.nrmse_fit_percent,
-                q.noise_std
-            );
-        }
+        print_channels(&fit.quality, files);
         if !poorly.is_empty() {
             println!(
                 "warning: poorly determined by these records: {} — the 95% interval is wider than {:.0} % of the value",

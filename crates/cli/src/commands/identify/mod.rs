@@ -6,9 +6,9 @@ mod kinds;
 use anyhow::Result;
 use fit::{
     fit_apparent_resistance, identify_inverse_model_pooled, parameter_estimates, record_speed,
-    steady_value, torque_constant, voltage_input, AxisRecord, Drive, ExcitedRecord, FullFit,
-    InverseModelSettings, KnownConstants, OffsetStatus, PaperIdentification, RecordKind, RecordSet,
-    TorqueConstantError, MECHANICAL_NAMES, PARAM_NAMES,
+    steady_value, torque_constant, voltage_input, AxisRecord, ChannelQuality, Drive, ExcitedRecord,
+    FullFit, InverseModelSettings, KnownConstants, OffsetStatus, PaperIdentification, RecordKind,
+    RecordSet, TorqueConstantError, MECHANICAL_NAMES, PARAM_NAMES,
 };
 use motor_model::Derived;
 use serde_json::{json, Value};
@@ -32,6 +32,33 @@ fn sig(x: f64) -> String {
         format!("{:.*}", (6 - magnitude).max(0) as usize, x)
     } else {
         format!("{x:.6e}")
+    }
+}
+
+/// The fit quality of each channel of each record (named from `files`), for `--json`.
+fn channels_json(quality: &[ChannelQuality], files: &[&str]) -> Value {
+    quality
+        .iter()
+        .map(|q| {
+            json!({
+                "record": files.get(q.test), "channel": q.channel.name(), "rms_residual": q.rms_residual,
+                "nrmse_fit_percent": q.nrmse_fit_percent, "noise_std": q.noise_std,
+            })
+        })
+        .collect()
+}
+
+/// One line per channel of each record (named from `files`): residual RMS, fit, noise.
+fn print_channels(quality: &[ChannelQuality], files: &[&str]) {
+    for q in quality {
+        println!(
+            "  {} {}: residual RMS {:.3e}, fit {:.3} %, noise {:.3e}",
+            files.get(q.test).copied().unwrap_or("?"),
+            q.channel.name(),
+            q.rms_residual,
+            q.nrmse_fit_percent,
+            q.noise_std
+        );
     }
 }
 
@@ -84,10 +111,7 @@ pub fn report_json(
                 "order": PARAM_NAMES,
                 "matrix": (0..6).map(|i| (0..6).map(|j| c[(i, j)]).collect::<Vec<f64>>()).collect::<Vec<_>>(),
             })),
-            "channels": f.quality.iter().map(|q| json!({
-                "record": files[q.test], "channel": q.channel.name(), "rms_residual": q.rms_residual,
-                "nrmse_fit_percent": q.nrmse_fit_percent, "noise_std": q.noise_std,
-            })).collect::<Vec<_>>(),
+            "channels": channels_json(&f.quality, files),
         }),
         None => match paper {
             Ok(paper) => json!({
@@ -164,16 +188,7 @@ fn print_table(
                     f.iterations
                 ),
             }
-            for q in &f.quality {
-                println!(
-                    "  {} {}: residual RMS {:.3e}, fit {:.3} %, noise {:.3e}",
-                    files[q.test],
-                    q.channel.name(),
-                    q.rms_residual,
-                    q.nrmse_fit_percent,
-                    q.noise_std
-                );
-            }
+            print_channels(&f.quality, files);
         }
         None => {
             if let Ok(paper) = paper {
