@@ -264,10 +264,12 @@ pub struct IdentifyArgs {
     /// Steady-state records at several voltages: fit the apparent-resistance law (8), Ts by (9).
     #[arg(long, value_name = "FILE.csv", num_args = 1.., conflicts_with_all = ["high", "low"])]
     pub steady: Vec<PathBuf>,
-    /// Known armature resistance R [ohm] for --steady (Sec. 2.2 assumes it known).
-    #[arg(long, value_name = "OHM", requires = "steady")]
+    /// Known armature resistance R [ohm]: for --steady (Sec. 2.2 assumes it known), or with
+    /// --torque-constant for J, f, Ts from --record files of voltage and speed only.
+    #[arg(long, value_name = "OHM")]
     pub resistance: Option<f64>,
-    /// Torque constant k [N·m/A] (N/A for a linear axis): known k for --steady; for --input
+    /// Torque constant k [N·m/A] (N/A for a linear axis): known k for --steady; with
+    /// --resistance, J, f, Ts from --record files of voltage and speed only; for --input
     /// current, the torque (force) per unit of the current column (EMPS: 35.15 N per volt of vir).
     #[arg(long, value_name = "K")]
     pub torque_constant: Option<f64>,
@@ -276,8 +278,9 @@ pub struct IdentifyArgs {
     #[arg(long, value_enum, default_value = "voltage")]
     pub input: DriveArg,
     /// Records of any voltage waveform (staircase, PRBS, sine, reversals; repeatable): all six
-    /// parameters by simulating each record (output error). With --input current: the one
-    /// record of a current-driven axis.
+    /// parameters by simulating each record (output error); without a current column (voltage
+    /// and an encoder or tachometer only), kS, kV, kA, and J, f, Ts given --resistance and
+    /// --torque-constant. With --input current: records of a current-driven axis, pooled.
     #[arg(long, value_name = "FILE.csv", conflicts_with_all = ["high", "low", "steady"])]
     pub record: Vec<PathBuf>,
     /// Start of the --record fit: `paper` or FILE.json (default: estimated from the records by

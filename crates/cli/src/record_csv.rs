@@ -209,8 +209,23 @@ pub fn read_mapped(path: &Path, map: &ColumnMap, need_voltage: bool) -> Result<R
 
 /// Reads a record file with its line numbers and the samples found at an ADC rail.
 pub fn read_loaded(path: &Path, map: &ColumnMap, need_voltage: bool) -> Result<Loaded> {
+    read_with(path, map, need_voltage, true)
+}
+
+/// [`read_loaded`] of a voltage-driven record whose current column may be absent (voltage and
+/// speed only): `record.current` is then empty.
+pub fn read_loaded_current_optional(path: &Path, map: &ColumnMap) -> Result<Loaded> {
+    read_with(path, map, true, false)
+}
+
+fn read_with(
+    path: &Path,
+    map: &ColumnMap,
+    need_voltage: bool,
+    need_current: bool,
+) -> Result<Loaded> {
     let table = read_table(path)?;
-    to_record(&table, map, need_voltage)
+    to_record(&table, map, need_voltage, need_current)
         .map_err(|(line, msg)| BadInput(format!("{}:{line}: {msg}", path.display())).into())
 }
 
@@ -533,8 +548,9 @@ fn check_unit_plausibility(
     let peak = |y: &[f64]| y.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let power = peak(&record.voltage) * peak(&record.current);
     let apparent_ohm = peak(&record.voltage) / peak(&record.current);
-    // Without a voltage column (a current-driven axis) there is nothing to compare with.
-    let with_voltage = peak(&record.voltage) > 0.0;
+    // Without a voltage column (a current-driven axis) there is nothing to compare with, nor
+    // without a current column (voltage and speed only).
+    let with_voltage = peak(&record.voltage) > 0.0 && !record.current.is_empty();
     if !stated("current")
         && with_voltage
         && (power > MAX_PLAIN_POWER_W || apparent_ohm < MIN_PLAIN_OHM)
@@ -564,12 +580,13 @@ fn adc_lsb(table: &Table, c: usize) -> Option<f64> {
 }
 
 /// Maps a table's columns to a record (SPEC section 4): names or aliases, units converted, `t`
-/// strictly increasing, `current` required, `voltage` required when `need_voltage`; finds the
-/// samples at an ADC rail.
+/// strictly increasing, `current` required when `need_current` (else empty when absent),
+/// `voltage` required when `need_voltage`; finds the samples at an ADC rail.
 fn to_record(
     table: &Table,
     map: &ColumnMap,
     need_voltage: bool,
+    need_current: bool,
 ) -> std::result::Result<Loaded, (usize, String)> {
     let header_line = table.header_line;
     if map.pairs.is_empty() {
@@ -604,10 +621,14 @@ fn to_record(
         get(name)?.ok_or((
             header_line,
             format!(
-                "no `{}` column in the header `{}`: a record needs t, current{} (map other names with --columns)",
+                "no `{}` column in the header `{}`: a record needs {} (map other names with --columns)",
                 map.header(name),
                 table.names.join(","),
-                if need_voltage { ", voltage" } else { "" }
+                match (need_voltage, need_current) {
+                    (true, true) => "t, current, voltage",
+                    (false, _) => "t, current",
+                    (true, false) => "t, voltage and a current, speed or position",
+                }
             ),
         ))
     };
@@ -635,7 +656,11 @@ fn to_record(
         ));
     }
     let mut record = Record {
-        current: required("current")?,
+        current: if need_current {
+            required("current")?
+        } else {
+            get("current")?.unwrap_or_default()
+        },
         voltage: if need_voltage {
             required("voltage")?
         } else {
@@ -725,7 +750,7 @@ mod tests {
 
     fn record(text: &str) -> std::result::Result<Loaded, (usize, String)> {
         let table = parse_bytes(text.as_bytes())?;
-        to_record(&table, &ColumnMap::default(), true)
+        to_record(&table, &ColumnMap::default(), true, true)
     }
 
     #[test]
@@ -793,7 +818,7 @@ mod tests {
         #[test]
         fn random_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..600)) {
             if let Ok(table) = parse_bytes(&bytes) {
-                let _ = to_record(&table, &ColumnMap::default(), true);
+                let _ = to_record(&table, &ColumnMap::default(), true, true);
             } else if let Err((line, msg)) = parse_bytes(&bytes) {
                 prop_assert!(line >= 1);
                 prop_assert!(!msg.is_empty() && !msg.contains('\n'));
@@ -823,7 +848,7 @@ mod tests {
                 .collect::<Vec<_>>()
                 .join(sep);
             if let Ok(table) = parse_bytes(text.as_bytes()) {
-                let _ = to_record(&table, &ColumnMap::default(), true);
+                let _ = to_record(&table, &ColumnMap::default(), true, true);
             }
         }
     }

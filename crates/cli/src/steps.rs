@@ -6,11 +6,13 @@ use std::path::Path;
 
 use anyhow::Result;
 use fit::{
-    detect_initial_state, equation_error_start_with_initial_states,
-    identify_output_error_with_initial_states, identify_step_pair, judge_clipping,
-    locate_step_with, record_speed, voltage_input, voltage_levels, ClippingVerdict,
-    DetectedInitialState, ExcitedRecord, FullFit, InitialState, LevelPrior, LmSettings,
-    RecordChannel, StepInputs, StepMethod, StepPairIdentification, StepRecord, StepTest,
+    current_adc_steps, detect_initial_state, equation_error_start_with_initial_states,
+    identify_feedforward, identify_output_error_with_initial_states, identify_step_pair,
+    judge_clipping, locate_step_with, record_speed, voltage_input, voltage_levels,
+    ClippingVerdict, CurrentChannel, DetectedInitialState, ExcitedRecord, FeedforwardFit,
+    FeedforwardSettings, FullFit, InitialState, LevelPrior, LmSettings, MeasuredChannels,
+    RecordChannel, SpeedRecord, StepInputs, StepMethod, StepPairIdentification, StepRecord,
+    StepTest,
 };
 use motor_model::{Effects, Input, MotorParams, Record};
 
@@ -39,6 +41,8 @@ pub struct LoadedStep {
     /// How the whole record starts, from its first samples (`None` where they cannot tell:
     /// taken as rest, as the step methods assume).
     pub initial: Option<DetectedInitialState>,
+    /// The channels the record measured (the current's ADC steps over the whole record).
+    pub channels: MeasuredChannels,
 }
 
 impl LoadedStep {
@@ -109,8 +113,10 @@ pub fn load_step(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedStep
     let masks = check_clipping(&shown, &loaded, quiet)?;
     let label = file_lines(&shown, &loaded.lines);
     let initial = initial_state_of(&loaded.record);
+    let channels = measured_channels(&loaded.record, loaded.current_lsb);
     let mut step = step_from_record_with(label, loaded.record, loaded.voltage_lsb)?;
     step.initial = initial;
+    step.channels = channels;
     step.inputs.current_lsb_a = loaded.current_lsb.unwrap_or(0.0);
     step.path = shown;
     let from = loaded.lines.len() - step.current.len();
@@ -160,7 +166,9 @@ pub fn step_from_record_with(
     let sign = if loc.volts < 0.0 { -1.0 } else { 1.0 };
     let tail = |v: &[f64]| v[from..].iter().map(|x| sign * x).collect::<Vec<f64>>();
     let speed = record_speed(&cols.t, cols.speed.as_deref(), cols.position.as_deref());
+    let channels = measured_channels(&cols, None);
     Ok(LoadedStep {
+        channels,
         label: shown.clone(),
         path: shown,
         volts: sign * loc.volts,
@@ -235,12 +243,30 @@ impl LoadedExcited {
             exclude_speed: self.exclude_speed.as_deref(),
         }
     }
+
+    /// The voltage-and-speed identification's view of the record (its current, if any, is
+    /// not used).
+    pub fn speed_record(&self) -> SpeedRecord<'_> {
+        SpeedRecord {
+            input: &self.input,
+            dt: self.dt,
+            speed: self.record.speed.as_deref(),
+            position: self.record.position.as_deref(),
+            exclude: self.exclude_speed.as_deref(),
+            priors: &self.priors,
+        }
+    }
 }
 
 /// Reads a record of any voltage waveform for the output-error fit.
 pub fn load_excited(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedExcited> {
+    excited_from(path, read_loaded(path, map, true)?, quiet)
+}
+
+/// A record of any voltage waveform read from `path` ([`load_excited`]): its voltage rebuilt,
+/// clipped samples judged (and, unless `quiet`, warned about).
+pub fn excited_from(path: &Path, loaded: Loaded, quiet: bool) -> Result<LoadedExcited> {
     let shown = path.display().to_string();
-    let loaded = read_loaded(path, map, true)?;
     let masks = check_clipping(&shown, &loaded, quiet)?;
     let label = file_lines(&shown, &loaded.lines);
     let header_line = loaded.lines.first().map_or(1, |l| l.saturating_sub(1));
@@ -350,4 +376,48 @@ pub fn fit_excited_from(
         full,
         initial: chosen,
     })
+}
+
+/// kS, kV, kA (and τe where the records show it) of `loaded` from voltage and speed alone
+/// ([`fit::identify_feedforward`], its default settings); errors name `label`.
+pub fn fit_voltage_speed(loaded: &[LoadedExcited], label: &str) -> Result<FeedforwardFit> {
+    let records: Vec<SpeedRecord> = loaded.iter().map(LoadedExcited::speed_record).collect();
+    identify_feedforward(&records, FeedforwardSettings::default())
+        .map_err(|e| BadInput(format!("{label}: {e}")).into())
+}
+
+/// The channels `rec` measured, for [`fit::RecordKind::decide`]: the current's range in ADC
+/// steps (of `current_lsb` \[A\] from the `# measurement:` metadata, else from the column's own
+/// values).
+pub fn measured_channels(rec: &Record, current_lsb: Option<f64>) -> MeasuredChannels {
+    MeasuredChannels {
+        voltage: !rec.voltage.is_empty(),
+        current: if rec.current.is_empty() {
+            CurrentChannel::Absent
+        } else {
+            CurrentChannel::Present {
+                adc_steps: current_adc_steps(&rec.current, current_lsb),
+            }
+        },
+        position: rec.position.is_some(),
+        tachometer: rec.speed.is_some(),
+    }
+}
+
+/// The channels every one of `each` measured (a current in all of them, its coarsest range).
+pub fn common_channels(each: &[MeasuredChannels]) -> MeasuredChannels {
+    let all = |f: fn(&MeasuredChannels) -> bool| each.iter().all(f);
+    let current = each.iter().try_fold(f64::INFINITY, |m, c| match c.current {
+        CurrentChannel::Present { adc_steps } => Some(m.min(adc_steps)),
+        CurrentChannel::Absent => None,
+    });
+    MeasuredChannels {
+        voltage: all(|c| c.voltage),
+        current: current.map_or(CurrentChannel::Absent, |adc_steps| {
+            CurrentChannel::Present { adc_steps }
+        }),
+        position: all(|c| c.position),
+        // Either speed serves the voltage-and-speed fit, record by record.
+        tachometer: all(|c| c.position || c.tachometer),
+    }
 }

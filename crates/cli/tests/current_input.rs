@@ -50,4 +50,46 @@ fn one_way_records_fix_the_offset_with_an_interval_for_ts_and_pool() {
     let (lo1, hi1) = ci(&one, "Ts");
     let (lo2, hi2) = ci(&both, "Ts");
     assert!(hi2 - lo2 < 0.5 * (hi1 - lo1));
+    // A forward and a backward run pooled separate Ts from the offset (0 in the plant).
+    let back = dir.join("back.csv");
+    let mut reverse = vec!["--voltage", "-40", "--seed", "3"];
+    reverse.extend(LOGGER);
+    simulate_to(&back, &reverse);
+    let two_ways = report(&[hv, back.to_str().unwrap()]);
+    assert_eq!(two_ways["offset_fitted"], true);
+    assert_eq!(
+        two_ways["record_kind"]["identifiable"],
+        serde_json::json!(["J", "f", "Ts", "offset"])
+    );
+    for (name, truth) in [("J", 1.0), ("f", 0.05), ("Ts", 0.03), ("offset", 0.0)] {
+        let (lo, hi) = ci(&two_ways, name);
+        eprintln!("forward + backward: {name} [{lo:.6e}, {hi:.6e}] truth {truth}");
+        assert!(lo <= truth && truth <= hi, "{name} [{lo}, {hi}]");
+    }
+}
+
+#[test]
+fn a_record_sampled_too_slowly_for_the_cutoff_is_named() {
+    let dir = scratch("current_input_rates");
+    let (fast, slow) = (dir.join("fast.csv"), dir.join("slow.csv"));
+    let mut args = vec!["--voltage", "40", "--duration", "5"];
+    args.extend(LOGGER);
+    simulate_to(&fast, &args);
+    args.extend(["--rate", "150"]);
+    simulate_to(&slow, &args);
+    let slow = slow.to_str().unwrap();
+    common::assert_bad_input(
+        &[
+            "identify",
+            "--input",
+            "current",
+            "--record",
+            fast.to_str().unwrap(),
+            "--record",
+            slow,
+            "--torque-constant",
+            "0.15",
+        ],
+        &format!("{slow}: --cutoff 100 Hz is not below half its sample rate (75"),
+    );
 }

@@ -28,6 +28,7 @@ use crate::full_model::{noise_std, quality_from_sums, Channel, ChannelQuality};
 use crate::input_uncertainty::LevelPrior;
 use crate::lm::{solve, LeastSquares, LmReport, LmSettings, NormalEquations, Termination};
 use crate::mechanical::{identify_inverse_model_pooled, AxisRecord, InverseModelSettings};
+use crate::pipeline::ParameterEstimate;
 use crate::stats::{newey_west_score_covariance, sandwich_uncertainty};
 
 /// The voltage-to-speed constants of a motor (module docs).
@@ -120,6 +121,52 @@ pub struct FeedforwardFit {
     pub termination: Termination,
 }
 
+/// Names of the feedforward constants as reports give them, in the order of
+/// [`FeedforwardFit::ci95`].
+pub const FEEDFORWARD_NAMES: [&str; 3] = ["kS", "kV", "kA"];
+/// SI units of [`FEEDFORWARD_NAMES`].
+pub const FEEDFORWARD_UNITS: [&str; 3] = ["V", "V·s/rad", "V·s²/rad"];
+
+impl FeedforwardFit {
+    /// kS, kV, kA with names, units and 95 % intervals; and, given `known` = (R \[Ω\],
+    /// k \[N·m/A\]), J, f, Ts ([`FeedforwardParams::mechanical`]) with the intervals of kA, kV,
+    /// kS mapped through the same linear relations (R and k taken as exact: their own
+    /// uncertainty is not in these intervals).
+    pub fn estimates(&self, known: Option<(f64, f64)>) -> Vec<ParameterEstimate> {
+        let p = &self.params;
+        let values = [p.ks_v, p.kv_v_s_per_rad, p.ka_v_s2_per_rad];
+        let mut out: Vec<ParameterEstimate> = (0..3)
+            .map(|i| ParameterEstimate {
+                name: FEEDFORWARD_NAMES[i],
+                unit: FEEDFORWARD_UNITS[i],
+                value: values[i],
+                ci95: self.ci95.map(|c| c[i]),
+            })
+            .collect();
+        if let Some((r_ohm, k)) = known {
+            let m = p.mechanical(r_ohm, k);
+            let scale = k / r_ohm;
+            let map = |i: usize, shift: f64| {
+                self.ci95
+                    .map(|c| [(c[i][0] - shift) * scale, (c[i][1] - shift) * scale])
+            };
+            for (name, unit, value, ci95) in [
+                ("J", "kg·m²", m.j_kgm2, map(2, 0.0)),
+                ("f", "N·m·s/rad", m.f_nms_per_rad, map(1, k)),
+                ("Ts", "N·m", m.ts_nm, map(0, 0.0)),
+            ] {
+                out.push(ParameterEstimate {
+                    name,
+                    unit,
+                    value,
+                    ci95,
+                });
+            }
+        }
+        out
+    }
+}
+
 /// The electrical time constant in a [`FeedforwardFit`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum TauE {
@@ -188,6 +235,9 @@ const SUBSTEPS_SMOOTH: usize = 4;
 const FD_STEP: f64 = 1e-6;
 /// Most checks for a zero crossing of the speed within one constant-voltage interval.
 const MAX_CHECKS: usize = 64;
+/// How far \[ln\] below its start the reduced fit may take kS before the τe stage restarts
+/// it from the start (a factor of 1000).
+const KS_COLLAPSE_LN: f64 = 6.907755278982137;
 /// Bisections locating a zero crossing of the speed (2⁻⁵⁰ of a check interval).
 const CROSSING_BISECTIONS: u32 = 50;
 
@@ -908,6 +958,12 @@ pub fn identify_feedforward(
                 r.sigma = *s;
             }
             let mut theta = reduced.params[..3].to_vec();
+            // Where τe's lag at the reversals looks like a smaller kS, the reduced fit can
+            // drive kS to 0 (its logarithm far below the start's): kS restarts there from the
+            // start's value, or its gradient in the logarithm vanishes.
+            if theta[0] < ks0.ln() - KS_COLLAPSE_LN {
+                theta[0] = ks0.ln();
+            }
             theta.push(tau0.min(0.1 * p.constants.tau_m_s()).ln());
             theta.extend_from_slice(&reduced.params[3..]);
             if settings.torque_constant.is_none() {

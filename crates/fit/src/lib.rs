@@ -15,6 +15,10 @@
 //!   unmodelled effects (SPEC section 5) in one output-error fit, each named with its unit and
 //!   interval ([`EffectEstimate`]); every fit returns its fitted traces ([`FittedChannel`]).
 //!
+//! - [`RecordKind`]: what a set of records can identify from the channels it measured;
+//!   [`identify_feedforward`]: kS, kV, kA (and J, f, Ts with R and k known) from voltage and
+//!   speed alone.
+//!
 //! - [`diagnose`]: the sim-to-real diagnosis; [`diagnose::localise`] says where a model still
 //!   disagrees with the records, against the records' own noise floor.
 //!
@@ -51,6 +55,7 @@ mod output_error;
 mod paper_method;
 mod parameters;
 mod plausibility;
+mod record_kind;
 mod signal;
 mod start;
 mod stats;
@@ -65,7 +70,7 @@ pub use error::FitError;
 pub use feedforward::{
     identify_feedforward, simulate_feedforward, simulate_voltage_speed, FeedforwardFit,
     FeedforwardParams, FeedforwardSettings, MechanicalFromFeedforward, SpeedRecord, TauE,
-    VoltageSpeedModel,
+    VoltageSpeedModel, FEEDFORWARD_NAMES, FEEDFORWARD_UNITS,
 };
 pub use full_model::{
     identify_full, identify_full_with_inputs, noise_std, Channel, ChannelQuality, FittedChannel,
@@ -99,6 +104,10 @@ pub use paper_method::{
 };
 pub use parameters::EffectEstimate;
 pub use plausibility::Refusal;
+pub use record_kind::{
+    current_adc_steps, CurrentChannel, CurrentUnused, Drive, KindRefusal, KnownConstant,
+    KnownConstants, MeasuredChannels, RecordKind, RecordSet, MIN_CURRENT_ADC_STEPS,
+};
 pub use signal::{decimate, Butterworth};
 pub use start::steady_state_start;
 pub use stats::{

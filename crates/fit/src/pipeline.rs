@@ -125,9 +125,9 @@ impl std::error::Error for StepPairError {
 /// A parameter as identified: name, unit, value and 95 % interval.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ParameterEstimate {
-    /// Name as in [`PARAM_NAMES`] (`R`, `L`, `k`, `f`, `J`, `Ts`).
+    /// Name as in [`PARAM_NAMES`] (`R`, `L`, `k`, `f`, `J`, `Ts`), or [`crate::FEEDFORWARD_NAMES`].
     pub name: &'static str,
-    /// SI unit as in [`PARAM_UNITS`].
+    /// SI unit (as in [`PARAM_UNITS`] for the six motor parameters).
     pub unit: &'static str,
     /// The value (SI units).
     pub value: f64,

@@ -1,22 +1,24 @@
 //! `motorid identify`: motor parameters from step records (or Ts from steady tests).
 
 mod batch;
+mod kinds;
 
 use anyhow::Result;
 use fit::{
     fit_apparent_resistance, identify_inverse_model_pooled, parameter_estimates, record_speed,
-    steady_value, torque_constant, voltage_input, AxisRecord, ExcitedRecord, FullFit,
-    InverseModelSettings, OffsetStatus, PaperIdentification, TorqueConstantError, MECHANICAL_NAMES,
-    PARAM_NAMES,
+    steady_value, torque_constant, voltage_input, AxisRecord, ChannelQuality, Drive, ExcitedRecord,
+    FullFit, InverseModelSettings, KnownConstants, OffsetStatus, PaperIdentification, RecordKind,
+    RecordSet, TorqueConstantError, MECHANICAL_NAMES, PARAM_NAMES,
 };
 use motor_model::Derived;
 use serde_json::{json, Value};
 
 use crate::args::{AxisArg, DriveArg, IdentifyArgs};
-use crate::record_csv::{read_loaded, read_mapped, ColumnMap};
+use crate::record_csv::{read_loaded, read_loaded_current_optional, read_mapped, ColumnMap};
 use crate::settings;
 use crate::steps::{
-    file_lines, fit_excited_from, identify_pair, in_order, load_excited, load_step,
+    common_channels, excited_from, file_lines, fit_excited_from, fit_voltage_speed,
+    identify_pair, in_order, load_excited, load_step, measured_channels,
 };
 use crate::{BadInput, NotConverged};
 
@@ -30,6 +32,33 @@ fn sig(x: f64) -> String {
         format!("{:.*}", (6 - magnitude).max(0) as usize, x)
     } else {
         format!("{x:.6e}")
+    }
+}
+
+/// The fit quality of each channel of each record (named from `files`), for `--json`.
+fn channels_json(quality: &[ChannelQuality], files: &[&str]) -> Value {
+    quality
+        .iter()
+        .map(|q| {
+            json!({
+                "record": files.get(q.test), "channel": q.channel.name(), "rms_residual": q.rms_residual,
+                "nrmse_fit_percent": q.nrmse_fit_percent, "noise_std": q.noise_std,
+            })
+        })
+        .collect()
+}
+
+/// One line per channel of each record (named from `files`): residual RMS, fit, noise.
+fn print_channels(quality: &[ChannelQuality], files: &[&str]) {
+    for q in quality {
+        println!(
+            "  {} {}: residual RMS {:.3e}, fit {:.3} %, noise {:.3e}",
+            files.get(q.test).copied().unwrap_or("?"),
+            q.channel.name(),
+            q.rms_residual,
+            q.nrmse_fit_percent,
+            q.noise_std
+        );
     }
 }
 
@@ -82,10 +111,7 @@ pub fn report_json(
                 "order": PARAM_NAMES,
                 "matrix": (0..6).map(|i| (0..6).map(|j| c[(i, j)]).collect::<Vec<f64>>()).collect::<Vec<_>>(),
             })),
-            "channels": f.quality.iter().map(|q| json!({
-                "record": files[q.test], "channel": q.channel.name(), "rms_residual": q.rms_residual,
-                "nrmse_fit_percent": q.nrmse_fit_percent, "noise_std": q.noise_std,
-            })).collect::<Vec<_>>(),
+            "channels": channels_json(&f.quality, files),
         }),
         None => match paper {
             Ok(paper) => json!({
@@ -162,16 +188,7 @@ fn print_table(
                     f.iterations
                 ),
             }
-            for q in &f.quality {
-                println!(
-                    "  {} {}: residual RMS {:.3e}, fit {:.3} %, noise {:.3e}",
-                    files[q.test],
-                    q.channel.name(),
-                    q.rms_residual,
-                    q.nrmse_fit_percent,
-                    q.noise_std
-                );
-            }
+            print_channels(&f.quality, files);
         }
         None => {
             if let Ok(paper) = paper {
@@ -315,15 +332,29 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
         if rec.position.is_none() {
             return Err(BadInput(format!("{}: no position column: --input current fits J, f, Ts from the position (map it with --columns position=HEADER)", path.display())).into());
         }
+        // Each record's own rate: the pooled fit's refusal would not say which file.
+        let rate_hz = 1.0 / motor_model::mean_period(&rec.t);
+        if !(a.cutoff > 0.0 && a.cutoff < 0.5 * rate_hz) {
+            return Err(BadInput(format!(
+                "{}: --cutoff {} Hz is not below half its sample rate ({} Hz): give a lower --cutoff, or records sampled faster",
+                path.display(),
+                a.cutoff,
+                sig(0.5 * rate_hz)
+            ))
+            .into());
+        }
     }
+    let each: Vec<_> = recs.iter().map(|r| measured_channels(r, None)).collect();
+    let kind = RecordKind::decide(
+        common_channels(&each),
+        Drive::Current,
+        RecordSet::AnyWaveform,
+        kinds::known_constants(a)?,
+    )
+    .map_err(|why| kinds::refused(&shown_records(&a.record), why))?;
     let path = &a.record[0];
     let rec = &recs[0];
-    let shown = a
-        .record
-        .iter()
-        .map(|p| p.display().to_string())
-        .collect::<Vec<_>>()
-        .join(", ");
+    let shown = shown_records(&a.record);
     let position = rec.position.as_deref().unwrap_or_default();
     let dt = motor_model::mean_period(&rec.t);
     // The torque constant: given, or from the voltage equation (2a) of the first record when
@@ -469,6 +500,7 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
         let report = json!({
             "method": "inverse_model",
             "input": "current",
+            "record_kind": kinds::kind_json(&kind),
             "parameters": parameters,
             "quality": {
                 "samples_after_decimation": fit.samples,
@@ -487,6 +519,7 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&report)?);
         return Ok(());
     }
+    println!("{}", kinds::kind_line(&kind));
     println!(
         "inverse model (current-driven axis): torque = J q'' + f q' + Ts sign(q') + offset, from {shown}"
     );
@@ -514,6 +547,15 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
 }
 
 pub fn run(a: &IdentifyArgs) -> Result<()> {
+    if a.resistance.is_some()
+        && a.steady.is_empty()
+        && (a.record.is_empty() || a.input == DriveArg::Current)
+    {
+        return Err(BadInput(
+            "--resistance is for --steady, or with --torque-constant for --record files of voltage and speed only".into(),
+        )
+        .into());
+    }
     if a.input == DriveArg::Current {
         return run_current(a);
     }
@@ -553,6 +595,13 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
         load_step(high, &map, a.quiet)?,
         load_step(low, &map, a.quiet)?,
     );
+    let kind = RecordKind::decide(
+        common_channels(&[hv.channels, lv.channels]),
+        Drive::Voltage,
+        RecordSet::StepPair,
+        KnownConstants::default(),
+    )
+    .map_err(|why| kinds::refused(&format!("{} / {}", hv.label, lv.label), why))?;
     let (hv, lv, swapped) = in_order(hv, lv);
     if let Some(why) = not_from_rest(a, [&hv, &lv]) {
         let note = format!(
@@ -591,11 +640,13 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
     let method = result.route.method_name();
     let full = result.full.as_ref();
     if a.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&report_json(method, paper, full, &files))?
-        );
+        let mut report = report_json(method, paper, full, &files);
+        if let Some(obj) = report.as_object_mut() {
+            obj.insert("record_kind".into(), kinds::kind_json(&kind));
+        }
+        println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
+        println!("{}", kinds::kind_line(&kind));
         let note = result.note().map(ToString::to_string);
         print_table(method, paper, full, &files, note.as_deref());
     }
@@ -630,7 +681,8 @@ fn not_from_rest(a: &IdentifyArgs, steps: [&crate::steps::LoadedStep; 2]) -> Opt
     }
 }
 
-/// `--record A.csv --record B.csv ...`: all six parameters by output error.
+/// `--record A.csv --record B.csv ...`: all six parameters by output error, or kS, kV, kA
+/// (and J, f, Ts with R and k given) from records without a usable current.
 fn run_records(a: &IdentifyArgs) -> Result<()> {
     run_output_error(a, &a.record, None)
 }
@@ -643,9 +695,30 @@ fn run_output_error(
     note: Option<&str>,
 ) -> Result<()> {
     let map = column_map(a)?;
+    let known = kinds::known_constants(a)?;
+    let mut channels = Vec::new();
+    let mut read = Vec::new();
+    for path in paths {
+        let loaded = read_loaded_current_optional(path, &map)?;
+        let c = measured_channels(&loaded.record, loaded.current_lsb);
+        let header = loaded.lines.first().map_or(1, |l| l.saturating_sub(1));
+        // Each record on its own first, so that a refusal names its file.
+        RecordKind::decide(c, Drive::Voltage, RecordSet::AnyWaveform, known)
+            .map_err(|why| kinds::refused(&format!("{}:{header}", path.display()), why))?;
+        channels.push(c);
+        read.push(loaded);
+    }
+    let kind = RecordKind::decide(
+        common_channels(&channels),
+        Drive::Voltage,
+        RecordSet::AnyWaveform,
+        known,
+    )
+    .map_err(|why| kinds::refused("records", why))?;
     let loaded = paths
         .iter()
-        .map(|p| load_excited(p, &map, a.quiet))
+        .zip(read)
+        .map(|(p, l)| excited_from(p, l, a.quiet))
         .collect::<Result<Vec<_>>>()?;
     let files: Vec<&str> = loaded.iter().map(|l| l.path.as_str()).collect();
     let all = loaded
@@ -653,6 +726,19 @@ fn run_output_error(
         .map(|l| l.label.as_str())
         .collect::<Vec<_>>()
         .join(" / ");
+    if kind.is_voltage_speed() {
+        // k is not passed into the fit: there the viscous share of kV stays free (with its
+        // prior), and a given k enters only J, f, Ts. Fixing it narrowed kA's interval of an
+        // encoder staircase of the small servo to [8.02e-4, 8.16e-4] around a truth of 8.00e-4.
+        let fit = fit_voltage_speed(&loaded, &all)?;
+        return kinds::report(a, &kind, &fit, &files);
+    }
+    if a.resistance.is_some() || a.torque_constant.is_some() {
+        return Err(BadInput(format!(
+            "{all}: --resistance and --torque-constant are for records without a usable current; these have one, and R and k are fitted from it"
+        ))
+        .into());
+    }
     let given = a.start.as_deref().map(settings::motor).transpose()?;
     let samples: usize = loaded.iter().map(|l| l.record.t.len()).sum();
     let clock = std::time::Instant::now();
@@ -717,9 +803,11 @@ fn run_output_error(
             if let Some(note) = note {
                 obj.insert("note".into(), note.into());
             }
+            obj.insert("record_kind".into(), kinds::kind_json(&kind));
         }
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
+        println!("{}", kinds::kind_line(&kind));
         print_table("output_error", Err(""), Some(&full), &files, None);
         for (file, chosen, fitted) in &initial {
             let at = fitted.map_or(String::new(), |f| {
@@ -743,6 +831,15 @@ fn run_output_error(
         crate::figures::fit_figures(dir, &loaded, &full.params, a.quiet)?;
     }
     converged(Some(&full))
+}
+
+/// The files of `paths`, comma-separated, for errors about all of them.
+fn shown_records(paths: &[std::path::PathBuf]) -> String {
+    paths
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// The `--columns` mapping, if given.
