@@ -8,11 +8,10 @@ use anyhow::Result;
 use fit::{
     current_adc_steps, detect_initial_state, equation_error_start_with_initial_states,
     identify_feedforward, identify_output_error_with_initial_states, identify_step_pair,
-    judge_clipping, locate_step_with, record_speed, voltage_input, voltage_levels,
-    ClippingVerdict, CurrentChannel, DetectedInitialState, ExcitedRecord, FeedforwardFit,
-    FeedforwardSettings, FullFit, InitialState, LevelPrior, LmSettings, MeasuredChannels,
-    RecordChannel, SpeedRecord, StepInputs, StepMethod, StepPairIdentification, StepRecord,
-    StepTest,
+    judge_clipping, locate_step_with, record_speed, voltage_input, voltage_levels, ClippingVerdict,
+    CurrentChannel, DetectedInitialState, ExcitedRecord, FeedforwardFit, FeedforwardSettings,
+    FullFit, InitialState, LevelPrior, LmSettings, MeasuredChannels, RecordChannel, SpeedRecord,
+    StepInputs, StepMethod, StepPairIdentification, StepRecord, StepTest,
 };
 use motor_model::{Effects, Input, MotorParams, Record};
 

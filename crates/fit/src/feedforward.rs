@@ -29,7 +29,7 @@ use crate::input_uncertainty::LevelPrior;
 use crate::lm::{solve, LeastSquares, LmReport, LmSettings, NormalEquations, Termination};
 use crate::mechanical::{identify_inverse_model_pooled, AxisRecord, InverseModelSettings};
 use crate::pipeline::ParameterEstimate;
-use crate::stats::{newey_west_score_covariance, sandwich_uncertainty};
+use crate::stats::{equal_runs, newey_west_run_covariance, sandwich_uncertainty};
 
 /// The voltage-to-speed constants of a motor (module docs).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -1072,7 +1072,15 @@ fn intervals(problem: &FfProblem, report: &LmReport) -> Option<(Vec<f64>, Vec<[f
     let priors = problem.nuisances();
     let n = r.len();
     r[n - priors..].iter_mut().for_each(|v| *v = 1.0);
-    let score = newey_west_score_covariance(&r, &jac, &problem.series())?;
+    // Readings that repeat exactly share one quantisation error (an encoder's speed held at 0
+    // while the rotor creeps through a reversal): see [`newey_west_run_covariance`].
+    let mut runs: Vec<usize> = problem
+        .records
+        .iter()
+        .flat_map(|rec| equal_runs(&rec.data))
+        .collect();
+    runs.extend(std::iter::repeat_n(1, priors));
+    let score = newey_west_run_covariance(&r, &jac, &problem.series(), &runs)?;
     let unc = sandwich_uncertainty(&report.normal, &score)?;
     let m = problem.n_model();
     let values: Vec<f64> = report.params[..m].iter().map(|t| t.exp()).collect();

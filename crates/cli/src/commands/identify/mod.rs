@@ -17,8 +17,8 @@ use crate::args::{AxisArg, DriveArg, IdentifyArgs};
 use crate::record_csv::{read_loaded, read_loaded_current_optional, read_mapped, ColumnMap};
 use crate::settings;
 use crate::steps::{
-    common_channels, excited_from, file_lines, fit_excited_from, fit_voltage_speed,
-    identify_pair, in_order, load_excited, load_step, measured_channels,
+    common_channels, excited_from, file_lines, fit_excited_from, fit_voltage_speed, identify_pair,
+    in_order, load_excited, load_step, measured_channels,
 };
 use crate::{BadInput, NotConverged};
 
