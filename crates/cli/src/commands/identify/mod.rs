@@ -15,7 +15,9 @@ use serde_json::{json, Value};
 use crate::args::{AxisArg, DriveArg, IdentifyArgs};
 use crate::record_csv::{read_loaded, read_mapped, ColumnMap};
 use crate::settings;
-use crate::steps::{file_lines, fit_excited, identify_pair, in_order, load_excited, load_step};
+use crate::steps::{
+    file_lines, fit_excited, identify_pair, in_order, load_excited, load_step_pair,
+};
 use crate::{BadInput, NotConverged};
 
 /// `x` with 7 significant digits, in plain or scientific notation as suits its size.
@@ -547,10 +549,7 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
             bytes as f64 / 1e6
         );
     }
-    let (hv, lv) = (
-        load_step(high, &map, a.quiet)?,
-        load_step(low, &map, a.quiet)?,
-    );
+    let (hv, lv) = load_step_pair(high, low, &map, a.quiet)?;
     let (hv, lv, swapped) = in_order(hv, lv);
     if !a.quiet {
         if let Some(note) = swapped {
