@@ -442,21 +442,11 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
         }
     }
     // J (or M), f, Ts and the offset with their names, intervals and units.
-    let axis = fit.axis();
-    let values = [
-        axis.mass_kg,
-        axis.viscous_ns_per_m,
-        axis.coulomb_n,
-        axis.offset_n,
-    ];
-    let intervals: [Option<[f64; 2]>; 4] = fit.ci95.map_or([None; 4], |c| c.map(Some));
     let rows = || {
-        MECHANICAL_NAMES
-            .iter()
-            .zip(values)
-            .zip(intervals)
+        fit.estimates()
+            .into_iter()
             .zip(units)
-            .map(|(((name, value), ci), unit)| (*name, value, ci, unit))
+            .map(|(e, unit)| (e.name, e.value, e.ci95, unit))
     };
     if a.json {
         let mut parameters = serde_json::Map::new();
