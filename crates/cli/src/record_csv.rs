@@ -287,6 +287,7 @@ struct TableParser {
 }
 
 impl TableParser {
+    /// A parser for an input of `size_hint` bytes (0 if unknown).
     fn new(size_hint: usize) -> Self {
         TableParser {
             table: Table::default(),

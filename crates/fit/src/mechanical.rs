@@ -73,26 +73,21 @@ pub struct MechanicalFit {
     pub fitted: Vec<FittedTorque>,
 }
 
-/// One identified axis parameter: its name ([`MECHANICAL_NAMES`]), value and 95 % interval
-/// (units of [`MechanicalFit::axis`]).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct MechanicalEstimate {
-    /// `J`, `f`, `Ts` or `offset`.
-    pub name: &'static str,
-    /// The value.
-    pub value: f64,
-    /// The 95 % interval `[lo, hi]`, if the fit gives one.
-    pub ci95: Option<[f64; 2]>,
-}
+/// Units of J, f, Ts and the offset of a rotary axis (torque in N·m, angle in rad).
+pub const MECHANICAL_UNITS_ROTARY: [&str; 4] = ["kg·m²", "N·m·s/rad", "N·m", "N·m"];
+/// Units of M, Fv, Fc and the offset of a linear axis (force in N, position in m).
+pub const MECHANICAL_UNITS_LINEAR: [&str; 4] = ["kg", "N·s/m", "N", "N"];
 
 impl MechanicalFit {
-    /// J, f, Ts and the offset with their names and 95 % intervals, in the order of
-    /// [`MECHANICAL_NAMES`].
-    pub fn estimates(&self) -> [MechanicalEstimate; 4] {
+    /// J, f, Ts and the offset with their names ([`MECHANICAL_NAMES`]), `units`
+    /// ([`MECHANICAL_UNITS_ROTARY`] or [`MECHANICAL_UNITS_LINEAR`], as the records are) and
+    /// 95 % intervals, in that order.
+    pub fn estimates(&self, units: [&'static str; 4]) -> [crate::ParameterEstimate; 4] {
         let a = &self.axis;
         let values = [a.mass_kg, a.viscous_ns_per_m, a.coulomb_n, a.offset_n];
-        std::array::from_fn(|i| MechanicalEstimate {
+        std::array::from_fn(|i| crate::ParameterEstimate {
             name: MECHANICAL_NAMES[i],
+            unit: units[i],
             value: values[i],
             ci95: self.ci95.map(|c| c[i]),
         })

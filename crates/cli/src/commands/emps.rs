@@ -156,7 +156,7 @@ pub fn run(a: &EmpsArgs) -> Result<()> {
     }
     if a.json {
         let report = json!({
-            "identified": fit.estimates().iter().zip(REFERENCE).map(|(e, r)| json!({
+            "identified": fit.estimates(fit::MECHANICAL_UNITS_LINEAR).iter().zip(REFERENCE).map(|(e, r)| json!({
                 "name": e.name, "value": e.value, "reference": r, "relative_difference": e.value / r - 1.0,
             })).collect::<Vec<_>>(),
             "estimation_record": {"position_relerr_percent": est_pos, "force_relerr_percent": est_force},
@@ -175,7 +175,11 @@ pub fn run(a: &EmpsArgs) -> Result<()> {
     println!(
         "EMPS — identified on {est_name} (force = {DRIVE_GAIN_N_PER_V} × vir), inverse model:"
     );
-    for (e, r) in fit.estimates().iter().zip(REFERENCE) {
+    for (e, r) in fit
+        .estimates(fit::MECHANICAL_UNITS_LINEAR)
+        .iter()
+        .zip(REFERENCE)
+    {
         let (name, v) = (e.name, e.value);
         println!(
             "  {name:<6} {v:>10.4}   published IDIM-LS {r:>10.4}   ({:+.2} %)",

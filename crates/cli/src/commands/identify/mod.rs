@@ -386,8 +386,8 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
         _ => Some("the offset is fixed at 0"),
     };
     let units = match a.axis {
-        AxisArg::Rotary => ["kg·m²", "N·m·s/rad", "N·m", "N·m"],
-        AxisArg::Linear => ["kg", "N·s/m", "N", "N"],
+        AxisArg::Rotary => fit::MECHANICAL_UNITS_ROTARY,
+        AxisArg::Linear => fit::MECHANICAL_UNITS_LINEAR,
     };
     if let Some(dir) = &a.plot {
         std::fs::create_dir_all(dir)
@@ -443,10 +443,9 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
     }
     // J (or M), f, Ts and the offset with their names, intervals and units.
     let rows = || {
-        fit.estimates()
+        fit.estimates(units)
             .into_iter()
-            .zip(units)
-            .map(|(e, unit)| (e.name, e.value, e.ci95, unit))
+            .map(|e| (e.name, e.value, e.ci95, e.unit))
     };
     if a.json {
         let mut parameters = serde_json::Map::new();
