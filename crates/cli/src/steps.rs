@@ -52,6 +52,13 @@ impl LoadedStep {
         }
     }
 
+    /// The time of each sample kept \[s\], from the step on (the fits' sample times).
+    pub fn times(&self) -> Vec<f64> {
+        (0..self.current.len())
+            .map(|i| i as f64 * self.dt)
+            .collect()
+    }
+
     /// The step-pair pipeline's view of the record: the test and its uncertain inputs.
     pub fn step_record(&self) -> StepRecord<'_> {
         StepRecord {

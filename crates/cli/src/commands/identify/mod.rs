@@ -13,6 +13,7 @@ use motor_model::Derived;
 use serde_json::{json, Value};
 
 use crate::args::{AxisArg, DriveArg, IdentifyArgs};
+use crate::figures::FigureRecord;
 use crate::record_csv::{read_loaded, read_mapped, ColumnMap};
 use crate::settings;
 use crate::steps::{
@@ -577,11 +578,12 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
         print_table(method, paper, full, &files, note.as_deref());
     }
     if let (Some(dir), Some(f)) = (&a.plot, full) {
-        let records = [high, low]
-            .iter()
-            .map(|p| load_excited(p, &map, true))
-            .collect::<Result<Vec<_>>>()?;
-        crate::figures::fit_figures(dir, &records, &f.params, a.quiet)?;
+        let records = [&hv, &lv].map(|s| FigureRecord {
+            path: &s.path,
+            t: s.times(),
+            voltage: None,
+        });
+        crate::figures::fit_figures(dir, &records, f, a.quiet)?;
     }
     converged(full)
 }
@@ -640,7 +642,15 @@ fn run_records(a: &IdentifyArgs) -> Result<()> {
         print_table("output_error", Err(""), Some(&full), &files, None);
     }
     if let Some(dir) = &a.plot {
-        crate::figures::fit_figures(dir, &loaded, &full.params, a.quiet)?;
+        let records: Vec<FigureRecord> = loaded
+            .iter()
+            .map(|l| FigureRecord {
+                path: &l.path,
+                t: l.record.t.clone(),
+                voltage: Some(&l.record.voltage),
+            })
+            .collect();
+        crate::figures::fit_figures(dir, &records, &full, a.quiet)?;
     }
     converged(Some(&full))
 }
