@@ -1,131 +1,130 @@
-//! `--plot DIR` figures of an identification: measured against model for each channel of each
-//! record, the residual beneath.
+//! `--plot DIR` figures of an identification: measured against model for each fitted channel
+//! of each record, the residual beneath, from the traces the fit returns
+//! ([`fit::FullFit::fitted`]).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::Result;
-use motor_model::{central_difference, Effects, MotorParams, Simulator};
+use fit::{Channel, FittedChannel, FullFit};
 
 use crate::plot::{self, Panel, Series, MEASURED, MODEL, OTHER};
-use crate::steps::LoadedExcited;
 
-/// A file stem for `path` in `dir`: `dir/<file stem>_fit`.
-fn stem_in(dir: &Path, path: &str) -> PathBuf {
+/// A file stem for `path` in `dir`: `dir/<file stem><suffix>_fit`.
+fn stem_in(dir: &Path, path: &str, suffix: &str) -> PathBuf {
     let name = Path::new(path)
         .file_stem()
         .map_or_else(|| "record".into(), |s| s.to_string_lossy().into_owned());
-    dir.join(format!("{name}_fit"))
+    dir.join(format!("{name}{suffix}_fit"))
 }
 
-/// Figures of the output-error fit: for each record, the voltage, and for current and speed
-/// the measurement and the simulation of `params`, with the residual (measured − model) under
-/// each. Clipped samples are drawn but were not fitted.
+/// What the figures need of a record beyond the fit: its file, the time of each sample the
+/// fit indexes \[s\], and the measured voltage on the same samples \[V\] if it is to be drawn.
+pub struct FigureRecord<'a> {
+    /// File it came from (names the figure).
+    pub path: &'a str,
+    /// Time of every sample of the record as fitted \[s\].
+    pub t: Vec<f64>,
+    /// Measured voltage of every sample \[V\], if drawn.
+    pub voltage: Option<&'a [f64]>,
+}
+
+/// The axis labels of a fitted channel and of its residual.
+fn labels(channel: Channel) -> (&'static str, &'static str) {
+    match channel {
+        Channel::Current => ("current [A]", "current residual [A]"),
+        Channel::EncoderSpeed => ("speed from the encoder [rad/s]", "speed residual [rad/s]"),
+        _ => ("speed [rad/s]", "speed residual [rad/s]"),
+    }
+}
+
+/// Figures of a fit: for each record (in the order of `records`, the fit's), the voltage if
+/// given, and for each fitted channel the measurement and the fitted model with the residual
+/// (measured − model) under it, over the samples fitted (clipped samples left out). Channels
+/// of a record fitted on different samples get a figure each.
 pub fn fit_figures(
     dir: &Path,
-    records: &[LoadedExcited],
-    params: &MotorParams,
+    records: &[FigureRecord<'_>],
+    fit: &FullFit,
     quiet: bool,
 ) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir)
         .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
     let mut written = Vec::new();
-    for rec in records {
-        let r = &rec.record;
-        let n = r.t.len();
-        let rate = 1.0 / motor_model::mean_period(&r.t);
-        let trace = Simulator::new(*params, Effects::none(), rec.input.clone())
-            .and_then(|s| s.run((n as f64 - 0.5) / rate, rate))
-            .map_err(|e| anyhow::anyhow!("{}: simulating the fitted model: {e}", rec.path))?;
-        let t: Vec<f64> = r.t.clone();
-        let model_v: Vec<f64> = trace.voltage.clone();
-        let current_res = plot::residual(&r.current, &trace.current);
-        let (speed, speed_label): (Vec<f64>, &str) = match (&r.position, &r.speed) {
-            (Some(p), _) => (
-                central_difference(&r.t, p),
-                "speed from the encoder [rad/s]",
-            ),
-            (None, Some(w)) => (w.clone(), "speed [rad/s]"),
-            (None, None) => (Vec::new(), ""),
-        };
-        let model_speed = if r.position.is_some() {
-            central_difference(&trace.t, &trace.position)
-        } else {
-            trace.speed.clone()
-        };
-        let speed_res = plot::residual(&speed, &model_speed);
-        let mut panels = vec![
-            Panel {
-                y_label: "voltage [V]",
-                series: vec![
-                    Series {
-                        label: "measured",
-                        values: &r.voltage,
-                        color: MEASURED,
-                    },
-                    Series {
-                        label: "as simulated",
-                        values: &model_v,
-                        color: MODEL,
-                    },
-                ],
-            },
-            Panel {
-                y_label: "current [A]",
-                series: vec![
-                    Series {
-                        label: "measured",
-                        values: &r.current,
-                        color: MEASURED,
-                    },
-                    Series {
-                        label: "model",
-                        values: &trace.current,
-                        color: MODEL,
-                    },
-                ],
-            },
-            Panel {
-                y_label: "current residual [A]",
-                series: vec![Series {
-                    label: "measured − model",
-                    values: &current_res,
-                    color: OTHER,
-                }],
-            },
-        ];
-        if !speed.is_empty() {
-            panels.push(Panel {
-                y_label: speed_label,
-                series: vec![
-                    Series {
-                        label: "measured",
-                        values: &speed,
-                        color: MEASURED,
-                    },
-                    Series {
-                        label: "model",
-                        values: &model_speed,
-                        color: MODEL,
-                    },
-                ],
-            });
-            panels.push(Panel {
-                y_label: "speed residual [rad/s]",
-                series: vec![Series {
-                    label: "measured − model",
-                    values: &speed_res,
-                    color: OTHER,
-                }],
-            });
-        }
-        let title = format!("{}: measured and identified model", rec.path);
-        let paths = plot::time_series(&stem_in(dir, &rec.path), &title, &t, &panels)?;
-        if !quiet {
-            for p in &paths {
-                eprintln!("wrote {}", p.display());
+    for (r, rec) in records.iter().enumerate() {
+        // Channels fitted on the same samples share a figure.
+        let mut groups: Vec<Vec<&FittedChannel>> = Vec::new();
+        for c in fit.fitted.iter().filter(|c| c.record == r) {
+            match groups.iter_mut().find(|g| g[0].samples == c.samples) {
+                Some(g) => g.push(c),
+                None => groups.push(vec![c]),
             }
         }
-        written.extend(paths);
+        for (g, group) in groups.iter().enumerate() {
+            let samples = &group[0].samples;
+            let at = |y: &[f64]| -> Vec<f64> {
+                samples
+                    .iter()
+                    .map(|&i| y.get(i).copied().unwrap_or(f64::NAN))
+                    .collect()
+            };
+            let t = at(&rec.t);
+            let voltage = rec.voltage.filter(|_| g == 0).map(at);
+            let residuals: Vec<Vec<f64>> = group
+                .iter()
+                .map(|c| plot::residual(&c.measured, &c.model))
+                .collect();
+            let mut panels = Vec::new();
+            if let Some(v) = &voltage {
+                panels.push(Panel {
+                    y_label: "voltage [V]",
+                    series: vec![Series {
+                        label: "measured",
+                        values: v,
+                        color: MEASURED,
+                    }],
+                });
+            }
+            for (c, residual) in group.iter().zip(&residuals) {
+                let (label, residual_label) = labels(c.channel);
+                panels.push(Panel {
+                    y_label: label,
+                    series: vec![
+                        Series {
+                            label: "measured",
+                            values: &c.measured,
+                            color: MEASURED,
+                        },
+                        Series {
+                            label: "model",
+                            values: &c.model,
+                            color: MODEL,
+                        },
+                    ],
+                });
+                panels.push(Panel {
+                    y_label: residual_label,
+                    series: vec![Series {
+                        label: "measured − model",
+                        values: residual,
+                        color: OTHER,
+                    }],
+                });
+            }
+            let suffix = if g == 0 {
+                String::new()
+            } else {
+                let names: Vec<&str> = group.iter().map(|c| c.channel.name()).collect();
+                format!("_{}", names.join("_"))
+            };
+            let title = format!("{}: measured and identified model", rec.path);
+            let paths = plot::time_series(&stem_in(dir, rec.path, &suffix), &title, &t, &panels)?;
+            if !quiet {
+                for p in &paths {
+                    eprintln!("wrote {}", p.display());
+                }
+            }
+            written.extend(paths);
+        }
     }
     Ok(written)
 }

@@ -59,6 +59,13 @@ impl LoadedStep {
         }
     }
 
+    /// The time of each sample kept \[s\], from the step on (the fits' sample times).
+    pub fn times(&self) -> Vec<f64> {
+        (0..self.current.len())
+            .map(|i| i as f64 * self.dt)
+            .collect()
+    }
+
     /// The step-pair pipeline's view of the record: the test and its uncertain inputs.
     pub fn step_record(&self) -> StepRecord<'_> {
         StepRecord {
@@ -79,8 +86,26 @@ pub struct ClipMasks {
 /// Refuses a record whose clipping hides too much ([`fit::judge_clipping`]), and warns (unless
 /// `quiet`) about the rest: those samples are left out of the fits.
 pub fn check_clipping(shown: &str, loaded: &Loaded, quiet: bool) -> Result<ClipMasks> {
+    let (warnings, masks) = judge_record_clipping(shown, loaded);
+    warn(&warnings, quiet);
+    masks
+}
+
+/// Writes `warnings` to standard error, one a line, unless `quiet`.
+fn warn(warnings: &[String], quiet: bool) {
+    if !quiet {
+        for w in warnings {
+            eprintln!("{w}");
+        }
+    }
+}
+
+/// [`check_clipping`] without writing: the warnings (given before any refusal) and the masks
+/// or the refusal.
+fn judge_record_clipping(shown: &str, loaded: &Loaded) -> (Vec<String>, Result<ClipMasks>) {
     let report = loaded.clipping_report();
     let mut line = report.iter();
+    let mut warnings = Vec::new();
     for (channel, mask) in loaded.clipped_channels() {
         let verdict = judge_clipping(channel, mask);
         if verdict == ClippingVerdict::Clean {
@@ -88,43 +113,86 @@ pub fn check_clipping(shown: &str, loaded: &Loaded, quiet: bool) -> Result<ClipM
         }
         let text = line.next().cloned().unwrap_or_default();
         if let ClippingVerdict::Refused { reason } = verdict {
-            return Err(BadInput(format!(
+            let refusal = BadInput(format!(
                 "{shown}: {text}: {reason}; record again with a wider range"
-            ))
-            .into());
+            ));
+            return (warnings, Err(refusal.into()));
         }
-        if !quiet {
-            eprintln!("warning: {shown}: {text}; those samples are left out of the fit");
-        }
+        warnings.push(format!(
+            "warning: {shown}: {text}; those samples are left out of the fit"
+        ));
     }
     let mask = |m: &[bool]| m.iter().any(|&x| x).then(|| m.to_vec());
-    Ok(ClipMasks {
+    let masks = ClipMasks {
         current: mask(loaded.clipped_mask(RecordChannel::Current)),
         speed: mask(loaded.clipped_mask(RecordChannel::Speed)),
-    })
+    };
+    (warnings, Ok(masks))
 }
 
 /// Reads `path`, finds the step and keeps the samples from it on; clipped samples are left out
 /// of the fits (and a record with too many is refused).
 pub fn load_step(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedStep> {
+    let (warnings, step) = read_step(path, map);
+    warn(&warnings, quiet);
+    step
+}
+
+/// [`load_step`] of a high- and a low-voltage record, the two read at once (each on a core of
+/// its own where there are two): the warnings and errors are those of `high` then `low`, in
+/// the order [`load_step`] one after the other gives them.
+pub fn load_step_pair(
+    high: &Path,
+    low: &Path,
+    map: &ColumnMap,
+    quiet: bool,
+) -> Result<(LoadedStep, LoadedStep)> {
+    let (high, low) = std::thread::scope(|scope| {
+        let low = scope.spawn(|| read_step(low, map));
+        let high = read_step(high, map);
+        (high, low.join())
+    });
+    let low = low.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+    let high = load_step_given(high, quiet)?;
+    Ok((high, load_step_given(low, quiet)?))
+}
+
+/// The step of a [`read_step`] result, its warnings written first (unless `quiet`).
+fn load_step_given(
+    (warnings, step): (Vec<String>, Result<LoadedStep>),
+    quiet: bool,
+) -> Result<LoadedStep> {
+    warn(&warnings, quiet);
+    step
+}
+
+/// [`load_step`] without writing: the clipping warnings (given before any error that follows
+/// them) and the step or the error.
+fn read_step(path: &Path, map: &ColumnMap) -> (Vec<String>, Result<LoadedStep>) {
     let shown = path.display().to_string();
-    let loaded = read_loaded(path, map, true)?;
-    let masks = check_clipping(&shown, &loaded, quiet)?;
-    let label = file_lines(&shown, &loaded.lines);
-    let initial = initial_state_of(&loaded.record);
-    let channels = measured_channels(&loaded.record, loaded.current_lsb);
-    let mut step = step_from_record_with(label, loaded.record, loaded.voltage_lsb)?;
-    step.initial = initial;
-    step.channels = channels;
-    step.inputs.current_lsb_a = loaded.current_lsb.unwrap_or(0.0);
-    step.path = shown;
-    let from = loaded.lines.len() - step.current.len();
-    step.exclude_current = masks.current.map(|m| m[from..].to_vec());
-    // The encoder speed has no ADC: only a tachometer column can be clipped.
-    if step.position.is_none() {
-        step.exclude_speed = masks.speed.map(|m| m[from..].to_vec());
-    }
-    Ok(step)
+    let loaded = match read_loaded(path, map, true) {
+        Ok(loaded) => loaded,
+        Err(e) => return (Vec::new(), Err(e)),
+    };
+    let (warnings, masks) = judge_record_clipping(&shown, &loaded);
+    let step = masks.and_then(|masks| {
+        let label = file_lines(&shown, &loaded.lines);
+        let initial = initial_state_of(&loaded.record);
+        let channels = measured_channels(&loaded.record, loaded.current_lsb);
+        let mut step = step_from_record_with(label, loaded.record, loaded.voltage_lsb)?;
+        step.initial = initial;
+        step.channels = channels;
+        step.inputs.current_lsb_a = loaded.current_lsb.unwrap_or(0.0);
+        step.path = shown;
+        let from = loaded.lines.len() - step.current.len();
+        step.exclude_current = masks.current.map(|m| m[from..].to_vec());
+        // The encoder speed has no ADC: only a tachometer column can be clipped.
+        if step.position.is_none() {
+            step.exclude_speed = masks.speed.map(|m| m[from..].to_vec());
+        }
+        Ok(step)
+    });
+    (warnings, step)
 }
 
 /// How a whole record starts ([`fit::detect_initial_state`]), `None` where its first samples
@@ -163,7 +231,14 @@ pub fn step_from_record_with(
     // Eq. (1)-(2) with Coulomb friction opposing the motion are odd in (E, I, Ω, θ): a
     // negative step from rest is the mirror image of a positive one, and is fitted as such.
     let sign = if loc.volts < 0.0 { -1.0 } else { 1.0 };
-    let tail = |v: &[f64]| v[from..].iter().map(|x| sign * x).collect::<Vec<f64>>();
+    // The record's own vectors, cut and mirrored in place.
+    let tail = |mut v: Vec<f64>| {
+        v.drain(..from.min(v.len()));
+        if sign < 0.0 {
+            v.iter_mut().for_each(|x| *x = -*x);
+        }
+        v
+    };
     let speed = record_speed(&cols.t, cols.speed.as_deref(), cols.position.as_deref());
     let channels = measured_channels(&cols, None);
     Ok(LoadedStep {
@@ -173,9 +248,9 @@ pub fn step_from_record_with(
         volts: sign * loc.volts,
         mirrored: sign < 0.0,
         dt: loc.dt,
-        current: tail(&cols.current),
-        speed: speed.as_deref().map(tail),
-        position: cols.position.as_deref().map(tail),
+        current: tail(cols.current),
+        speed: speed.map(tail),
+        position: cols.position.map(tail),
         exclude_current: None,
         exclude_speed: None,
         inputs: loc.inputs(),

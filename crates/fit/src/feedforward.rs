@@ -903,7 +903,12 @@ pub fn identify_feedforward(
         equation: "voltage-to-speed start (E = kS sign Ω + kV Ω + kA dΩ/dt)",
         reason: e.to_string(),
     })?;
-    let [ka0, kv0, ks0, _] = inverse.values;
+    let motor_model::AxisParams {
+        mass_kg: ka0,
+        viscous_ns_per_m: kv0,
+        coulomb_n: ks0,
+        ..
+    } = inverse.axis;
     let peak_e = voltages
         .iter()
         .flatten()

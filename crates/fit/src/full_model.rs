@@ -118,9 +118,10 @@ pub struct FullFit {
     pub effect_estimates: Vec<EffectEstimate>,
     /// The fitted channels at the solution, measured and modelled.
     pub fitted: Vec<FittedChannel>,
-    /// Standard errors of R, L, k, f, J, Ts (SI units); `None` if the fit has no
-    /// degrees of freedom or a singular Jacobian (a parameter the data cannot determine).
-    pub std_error: Option<[f64; 6]>,
+    /// Standard error of each parameter, by name and in its unit (the standard error of R
+    /// in `std_error.r_ohm` \[Ω\], …); `None` if the fit has no degrees of freedom or a
+    /// singular Jacobian (a parameter the data cannot determine).
+    pub std_error: Option<MotorParams>,
     /// 95 % intervals `[lo, hi]` (t distribution, as `nlparci`, on a Newey–West covariance),
     /// SI units.
     pub ci95: Option<[[f64; 2]; 6]>,
@@ -730,7 +731,17 @@ pub(crate) fn set_intervals(
         .as_ref()
         .and_then(|c| parameters.intervals(&fit.theta, c, dof));
     if let (Some(iv), Some(cov)) = (&intervals, cov_theta) {
-        fit.std_error = Some(std::array::from_fn(|i| iv.std_error[i]));
+        fit.std_error = match iv.std_error[..] {
+            [r_ohm, l_henry, k_nm_per_a, f_nms_per_rad, j_kgm2, ts_nm, ..] => Some(MotorParams {
+                r_ohm,
+                l_henry,
+                k_nm_per_a,
+                f_nms_per_rad,
+                j_kgm2,
+                ts_nm,
+            }),
+            _ => None,
+        };
         fit.ci95 = Some(std::array::from_fn(|i| iv.ci95[i]));
         fit.correlation = Some(iv.correlation.clone());
         fit.theta_covariance = Some(cov);

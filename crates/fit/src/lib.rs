@@ -87,7 +87,8 @@ pub use lm::{
 };
 pub use mechanical::{
     identify_inverse_model, identify_inverse_model_pooled, AxisRecord, FittedTorque,
-    InverseModelSettings, MechanicalFit, OffsetStatus, MECHANICAL_NAMES,
+    InverseModelSettings, MechanicalFit, OffsetStatus, MECHANICAL_NAMES, MECHANICAL_UNITS_LINEAR,
+    MECHANICAL_UNITS_ROTARY,
 };
 pub use model33::{fit_33, Fit33, Params33, Record33};
 pub use output_error::{

@@ -51,8 +51,10 @@ impl Default for InverseModelSettings {
 /// kg·m², N·m·s/rad, N·m, N·m; for a linear one kg, N·s/m, N, N).
 #[derive(Debug, Clone, PartialEq)]
 pub struct MechanicalFit {
-    /// `[J, f, Ts, offset]` (offset exactly 0 when it is not fitted).
-    pub values: [f64; 4],
+    /// The identified axis: J (or M), f, Ts and the offset, in the units of the torque (force)
+    /// column and the position (kg or kg·m², N·s/m or N·m·s/rad, N or N·m); the offset is
+    /// exactly 0 when it is not fitted.
+    pub axis: motor_model::AxisParams,
     /// 95 % intervals (Student t on the least-squares covariance, as `nlparci`).
     pub ci95: Option<[[f64; 2]; 4]>,
     /// Correlation matrix (4 × 4, or 3 × 3 of J, f, Ts when the offset is fixed).
@@ -71,17 +73,24 @@ pub struct MechanicalFit {
     pub fitted: Vec<FittedTorque>,
 }
 
+/// Units of J, f, Ts and the offset of a rotary axis (torque in N·m, angle in rad).
+pub const MECHANICAL_UNITS_ROTARY: [&str; 4] = ["kg·m²", "N·m·s/rad", "N·m", "N·m"];
+/// Units of M, Fv, Fc and the offset of a linear axis (force in N, position in m).
+pub const MECHANICAL_UNITS_LINEAR: [&str; 4] = ["kg", "N·s/m", "N", "N"];
+
 impl MechanicalFit {
-    /// The identified axis with named fields: J (or M), f, Ts and the offset, in the units of the
-    /// torque (force) column and the position (kg or kg·m², N·s/m or N·m·s/rad, N or N·m).
-    pub fn axis(&self) -> motor_model::AxisParams {
-        let [mass_kg, viscous_ns_per_m, coulomb_n, offset_n] = self.values;
-        motor_model::AxisParams {
-            mass_kg,
-            viscous_ns_per_m,
-            coulomb_n,
-            offset_n,
-        }
+    /// J, f, Ts and the offset with their names ([`MECHANICAL_NAMES`]), `units`
+    /// ([`MECHANICAL_UNITS_ROTARY`] or [`MECHANICAL_UNITS_LINEAR`], as the records are) and
+    /// 95 % intervals, in that order.
+    pub fn estimates(&self, units: [&'static str; 4]) -> [crate::ParameterEstimate; 4] {
+        let a = &self.axis;
+        let values = [a.mass_kg, a.viscous_ns_per_m, a.coulomb_n, a.offset_n];
+        std::array::from_fn(|i| crate::ParameterEstimate {
+            name: MECHANICAL_NAMES[i],
+            unit: units[i],
+            value: values[i],
+            ci95: self.ci95.map(|c| c[i]),
+        })
     }
 }
 
@@ -368,8 +377,14 @@ pub fn identify_inverse_model_pooled(
     // A fixed offset is exactly 0, its interval [0, 0].
     let values: [f64; 4] = std::array::from_fn(|i| theta.get(i).copied().unwrap_or(0.0));
     let half = |u: &crate::stats::Uncertainty, i: usize| u.ci95_half_width.get(i).copied();
+    let [mass_kg, viscous_ns_per_m, coulomb_n, offset_n] = values;
     Ok(MechanicalFit {
-        values,
+        axis: motor_model::AxisParams {
+            mass_kg,
+            viscous_ns_per_m,
+            coulomb_n,
+            offset_n,
+        },
         ci95: unc.as_ref().map(|u| {
             std::array::from_fn(|i| {
                 let h = half(u, i).unwrap_or(0.0);

@@ -1132,7 +1132,12 @@ fn equation_error_estimate(
     };
     let mechanical = identify_inverse_model_pooled(&axis, settings)
         .map_err(|e| domain(format!("the torque equation (2b): {e}")))?;
-    let [j, f, ts, _] = mechanical.values;
+    let motor_model::AxisParams {
+        mass_kg: j,
+        viscous_ns_per_m: f,
+        coulomb_n: ts,
+        ..
+    } = mechanical.axis;
     if !(j > 0.0 && j.is_finite()) {
         return Err(domain(format!(
             "J = {j:.4e} kg·m² from the torque equation: the records show too little acceleration"

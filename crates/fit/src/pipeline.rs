@@ -543,11 +543,9 @@ mod tests {
     #[test]
     fn poorly_determined_beyond_ten_percent() {
         let p = MotorParams::paper();
-        let ci: [[f64; 2]; 6] = std::array::from_fn(|k| {
-            let v = p.values()[k];
-            let half = if k == 3 { 0.2 } else { 0.05 };
-            [v * (1.0 - half), v * (1.0 + half)]
-        });
+        let mut ci = p.values().map(|v| [v * 0.95, v * 1.05]);
+        // f, the fourth, known to ±20 % only.
+        ci[3] = [p.f_nms_per_rad * 0.8, p.f_nms_per_rad * 1.2];
         let e = parameter_estimates(&p, Some(&ci));
         let poor: Vec<&str> = e
             .iter()

@@ -247,8 +247,56 @@ impl NeweyWest {
     /// ones count as 0).
     pub fn push(&mut self, g: &[f64]) {
         let p = self.p;
-        let lags = self.lags;
         let g = &g[..p.min(g.len())];
+        // The usual sizes through a kernel of fixed size (the same sums in the same order,
+        // without the bounds checks and run-time loop lengths of the general one).
+        match (g.len() == p).then_some(p) {
+            Some(3) => self.accumulate::<3>(g),
+            Some(4) => self.accumulate::<4>(g),
+            Some(6) => self.accumulate::<6>(g),
+            Some(7) => self.accumulate::<7>(g),
+            Some(8) => self.accumulate::<8>(g),
+            _ => self.accumulate_any(g),
+        }
+        let slot = self.seen % self.lags;
+        let dst = &mut self.ring[slot * p..(slot + 1) * p];
+        dst.fill(0.0);
+        dst[..g.len()].copy_from_slice(g);
+        self.seen += 1;
+    }
+
+    /// The sums of [`NeweyWest::push`] for a score of exactly `N == p` values.
+    fn accumulate<const N: usize>(&mut self, g: &[f64]) {
+        let (Ok(g), Ok(sum)) = (
+            <&[f64; N]>::try_from(g),
+            <&mut [[f64; N]; N]>::try_from(self.sum.as_chunks_mut::<N>().0),
+        ) else {
+            return self.accumulate_any(g);
+        };
+        let (ring, _) = self.ring.as_chunks::<N>();
+        let lags = self.lags;
+        for (row, ga) in sum.iter_mut().zip(g) {
+            for (cell, gb) in row.iter_mut().zip(g) {
+                *cell += ga * gb;
+            }
+        }
+        for l in 1..=lags.min(self.seen) {
+            let weight = 1.0 - l as f64 / (lags as f64 + 1.0);
+            let Some(past) = ring.get((self.seen - l) % lags) else {
+                continue;
+            };
+            for ((row, ga), pa) in sum.iter_mut().zip(g).zip(past) {
+                for ((cell, gb), pb) in row.iter_mut().zip(g).zip(past) {
+                    *cell += weight * (ga * pb + pa * gb);
+                }
+            }
+        }
+    }
+
+    /// The sums of [`NeweyWest::push`] for a score of any length up to `p`.
+    fn accumulate_any(&mut self, g: &[f64]) {
+        let p = self.p;
+        let lags = self.lags;
         for (a, ga) in g.iter().enumerate() {
             for (b, gb) in g.iter().enumerate() {
                 self.sum[a * p + b] += ga * gb;
@@ -264,11 +312,6 @@ impl NeweyWest {
                 }
             }
         }
-        let slot = self.seen % lags;
-        let dst = &mut self.ring[slot * p..(slot + 1) * p];
-        dst.fill(0.0);
-        dst[..g.len()].copy_from_slice(g);
-        self.seen += 1;
     }
 
     /// The accumulated covariance (`p × p`), `None` if any entry is not finite.

@@ -82,14 +82,17 @@ fn a_forward_and_a_backward_record_pooled_separate_ts_from_the_offset() {
     assert_eq!(fit.offset_status, OffsetStatus::Fitted);
     let ci = fit.ci95.expect("intervals");
     let a = axis();
-    let truth = [a.mass_kg, a.viscous_ns_per_m, a.coulomb_n, a.offset_n];
-    eprintln!("pooled: {:?} {:?}", fit.values, ci);
-    for (k, name) in ["M", "Fv", "Fc", "offset"].iter().enumerate() {
+    let f = fit.axis;
+    eprintln!("pooled: {f:?} {ci:?}");
+    for (name, got, truth) in [
+        ("M", f.mass_kg, a.mass_kg),
+        ("Fv", f.viscous_ns_per_m, a.viscous_ns_per_m),
+        ("Fc", f.coulomb_n, a.coulomb_n),
+        ("offset", f.offset_n, a.offset_n),
+    ] {
         assert!(
-            (fit.values[k] / truth[k] - 1.0).abs() < 0.05,
-            "{name}: {} against {}",
-            fit.values[k],
-            truth[k]
+            (got / truth - 1.0).abs() < 0.05,
+            "{name}: {got} against {truth}"
         );
     }
     assert!(
@@ -109,16 +112,16 @@ fn one_direction_alone_fixes_the_offset_and_ts_carries_the_load() {
     }];
     let fit = identify_inverse_model_pooled(&records, settings()).unwrap();
     assert_eq!(fit.offset_status, OffsetStatus::FixedOneDirection);
-    assert_eq!(fit.values[3], 0.0);
+    assert_eq!(fit.axis.offset_n, 0.0);
     let ci = fit.ci95.expect("an interval for Ts, not none");
     // Moving forward, friction and the constant load add up: Ts + offset.
     let a = axis();
     let carried = a.coulomb_n + a.offset_n;
-    eprintln!("one way: {:?} {:?}", fit.values, ci);
+    eprintln!("one way: {:?} {ci:?}", fit.axis);
     assert!(
-        (fit.values[2] / carried - 1.0).abs() < 0.05,
+        (fit.axis.coulomb_n / carried - 1.0).abs() < 0.05,
         "Ts {} against Ts + offset {carried}",
-        fit.values[2]
+        fit.axis.coulomb_n
     );
     assert!(ci[2][1] - ci[2][0] > 0.0 && ci[2][1] - ci[2][0] < 0.5 * carried);
 }

@@ -7,7 +7,7 @@
 //! Simulated that way, the validation record is matched as closely as the estimation record.
 
 use anyhow::Result;
-use fit::{identify_inverse_model, InverseModelSettings, MECHANICAL_NAMES};
+use fit::{identify_inverse_model, InverseModelSettings};
 use motor_model::{
     pulse_split, relative_error_percent, simulate_pd_axis, PdController,
     EMPS_DRIVE_GAIN_N_PER_V as DRIVE_GAIN_N_PER_V, EMPS_KP_PER_S, EMPS_KV_V_PER_M_S,
@@ -55,7 +55,7 @@ pub fn run(a: &EmpsArgs) -> Result<()> {
         InverseModelSettings::default(),
     )
     .map_err(|e| BadInput(format!("{est_name}: {e}")))?;
-    let axis = fit.axis();
+    let axis = fit.axis;
     let pd = PdController::emps();
 
     // Simulate each record in closed loop from its reference; the validation one without and
@@ -156,8 +156,8 @@ pub fn run(a: &EmpsArgs) -> Result<()> {
     }
     if a.json {
         let report = json!({
-            "identified": MECHANICAL_NAMES.iter().zip(fit.values).zip(REFERENCE).map(|((n, v), r)| json!({
-                "name": n, "value": v, "reference": r, "relative_difference": v / r - 1.0,
+            "identified": fit.estimates(fit::MECHANICAL_UNITS_LINEAR).iter().zip(REFERENCE).map(|(e, r)| json!({
+                "name": e.name, "value": e.value, "reference": r, "relative_difference": e.value / r - 1.0,
             })).collect::<Vec<_>>(),
             "estimation_record": {"position_relerr_percent": est_pos, "force_relerr_percent": est_force},
             "validation_record": {
@@ -175,7 +175,12 @@ pub fn run(a: &EmpsArgs) -> Result<()> {
     println!(
         "EMPS — identified on {est_name} (force = {DRIVE_GAIN_N_PER_V} × vir), inverse model:"
     );
-    for ((name, v), r) in MECHANICAL_NAMES.iter().zip(fit.values).zip(REFERENCE) {
+    for (e, r) in fit
+        .estimates(fit::MECHANICAL_UNITS_LINEAR)
+        .iter()
+        .zip(REFERENCE)
+    {
+        let (name, v) = (e.name, e.value);
         println!(
             "  {name:<6} {v:>10.4}   published IDIM-LS {r:>10.4}   ({:+.2} %)",
             100.0 * (v / r - 1.0)

@@ -267,11 +267,12 @@ fn covered(fit: &fit::FullFit, truth: &Motor, inside: &mut [usize; 6]) {
     if std::env::var_os("COVERAGE_VERBOSE").is_some() {
         // Each parameter's error in units of its 95 % half-width (|z| > 1: a miss).
         let z: Vec<String> = fit.ci95.map_or(Vec::new(), |ci| {
-            (0..6)
-                .map(|k| {
-                    let v = fit.params.values()[k];
-                    format!("{:+.2}", (v - truth[k]) / (0.5 * (ci[k][1] - ci[k][0])))
-                })
+            fit.params
+                .values()
+                .iter()
+                .zip(truth)
+                .zip(ci)
+                .map(|((v, t), [lo, hi])| format!("{:+.2}", (v - t) / (0.5 * (hi - lo))))
                 .collect()
         });
         let rel: Vec<String> = (0..6)

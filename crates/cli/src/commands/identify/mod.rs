@@ -14,11 +14,12 @@ use motor_model::Derived;
 use serde_json::{json, Value};
 
 use crate::args::{AxisArg, DriveArg, IdentifyArgs};
+use crate::figures::FigureRecord;
 use crate::record_csv::{read_loaded, read_loaded_current_optional, read_mapped, ColumnMap};
 use crate::settings;
 use crate::steps::{
     common_channels, excited_from, file_lines, fit_excited_from, fit_voltage_speed, identify_pair,
-    in_order, load_excited, load_step, measured_channels,
+    in_order, load_step_pair, measured_channels,
 };
 use crate::{BadInput, NotConverged};
 
@@ -417,8 +418,8 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
         _ => Some("the offset is fixed at 0"),
     };
     let units = match a.axis {
-        AxisArg::Rotary => ["kg·m²", "N·m·s/rad", "N·m", "N·m"],
-        AxisArg::Linear => ["kg", "N·s/m", "N", "N"],
+        AxisArg::Rotary => fit::MECHANICAL_UNITS_ROTARY,
+        AxisArg::Linear => fit::MECHANICAL_UNITS_LINEAR,
     };
     if let Some(dir) = &a.plot {
         std::fs::create_dir_all(dir)
@@ -473,21 +474,10 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
         }
     }
     // J (or M), f, Ts and the offset with their names, intervals and units.
-    let axis = fit.axis();
-    let values = [
-        axis.mass_kg,
-        axis.viscous_ns_per_m,
-        axis.coulomb_n,
-        axis.offset_n,
-    ];
-    let intervals: [Option<[f64; 2]>; 4] = fit.ci95.map_or([None; 4], |c| c.map(Some));
     let rows = || {
-        MECHANICAL_NAMES
-            .iter()
-            .zip(values)
-            .zip(intervals)
-            .zip(units)
-            .map(|(((name, value), ci), unit)| (*name, value, ci, unit))
+        fit.estimates(units)
+            .into_iter()
+            .map(|e| (e.name, e.value, e.ci95, e.unit))
     };
     if a.json {
         let mut parameters = serde_json::Map::new();
@@ -591,10 +581,7 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
             bytes as f64 / 1e6
         );
     }
-    let (hv, lv) = (
-        load_step(high, &map, a.quiet)?,
-        load_step(low, &map, a.quiet)?,
-    );
+    let (hv, lv) = load_step_pair(high, low, &map, a.quiet)?;
     let kind = RecordKind::decide(
         common_channels(&[hv.channels, lv.channels]),
         Drive::Voltage,
@@ -651,11 +638,12 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
         print_table(method, paper, full, &files, note.as_deref());
     }
     if let (Some(dir), Some(f)) = (&a.plot, full) {
-        let records = [high, low]
-            .iter()
-            .map(|p| load_excited(p, &map, true))
-            .collect::<Result<Vec<_>>>()?;
-        crate::figures::fit_figures(dir, &records, &f.params, a.quiet)?;
+        let records = [&hv, &lv].map(|s| FigureRecord {
+            path: &s.path,
+            t: s.times(),
+            voltage: None,
+        });
+        crate::figures::fit_figures(dir, &records, f, a.quiet)?;
     }
     converged(full)
 }
@@ -828,7 +816,15 @@ fn run_output_error(
         }
     }
     if let Some(dir) = &a.plot {
-        crate::figures::fit_figures(dir, &loaded, &full.params, a.quiet)?;
+        let records: Vec<FigureRecord> = loaded
+            .iter()
+            .map(|l| FigureRecord {
+                path: &l.path,
+                t: l.record.t.clone(),
+                voltage: Some(&l.record.voltage),
+            })
+            .collect();
+        crate::figures::fit_figures(dir, &records, &full, a.quiet)?;
     }
     converged(Some(&full))
 }
