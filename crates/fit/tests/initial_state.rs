@@ -127,7 +127,7 @@ fn judge(fit: &FullFit, what: &str) -> (usize, f64, f64) {
         fit.params
     );
     let ci = fit.ci95.expect("intervals");
-    let se = fit.std_error.expect("standard errors");
+    let se = fit.std_error.expect("standard errors").values();
     let (mut misses, mut worst_error, mut widest) = (0, 0.0f64, 0.0f64);
     for (k, (&got, want)) in fit.params.values().iter().zip(servo().values()).enumerate() {
         let [lo, hi] = ci[k];
