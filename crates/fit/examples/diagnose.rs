@@ -60,10 +60,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
         for c in &stage.candidates {
             println!(
-                "  {:<22} testable {:<5} sig {:<5} p {:.2e}  train {:.4}→{:.4}  held-out {:.4}→{:.4}  {:?} {}",
+                "  {:<22} {:<31} score {:>10.2e} p {:.2e}  train {:.4}→{:.4}  held-out {:.4}→{:.4}  {:?} {}",
                 c.name,
-                c.testable,
-                c.significant,
+                c.assessment.words(),
+                c.screening.map_or(f64::NAN, |s| s.statistic),
                 c.p_value,
                 c.train_nrmse_before,
                 c.train_nrmse_after,

@@ -11,8 +11,10 @@
 //!   frequency and shaft angle, with the whiteness and input cross-correlation of MATLAB's
 //!   `resid`. Each part carries a test that separates a real gap from noise.
 //! - [`diagnose`] ([`run`]): the whole diagnosis — the nominal fit, the localisation, every
-//!   candidate refitted with the motor on training data and judged on held-out data, stage
+//!   candidate screened, the best refitted with the motor on training data and judged on held-out data, stage
 //!   after stage.
+//! - [`screen`]: the score test of every candidate at the base model, which decides the few
+//!   that are refitted in full.
 //! - [`verdict`]: *which* — candidate effects ranked by their held-out improvement, each with a
 //!   paired test against the noise, `none` when nothing is significant, an ambiguous verdict
 //!   when the best two cannot be told apart.
@@ -22,9 +24,10 @@
 
 pub mod localise;
 pub mod run;
+pub mod screen;
 pub mod verdict;
 
 pub use run::{
-    diagnose, CandidateReport, DiagnoseError, DiagnoseProgress, DiagnoseSettings, Diagnosis,
-    EffectParam, ParamShift, Stage,
+    diagnose, Assessment, CandidateReport, DiagnoseError, DiagnoseProgress, DiagnoseSettings,
+    Diagnosis, EffectParam, ParamShift, Stage,
 };
