@@ -15,6 +15,8 @@
 //!   after stage.
 //! - [`screen`]: the score test of every candidate at the base model, which decides the few
 //!   that are refitted in full.
+//! - [`benchmark`]: the diagnosis scored on cases whose effect it is not told
+//!   ([`motor_model::withheld`]).
 //! - [`verdict`]: *which* — candidate effects ranked by their held-out improvement, each with a
 //!   paired test against the noise, `none` when nothing is significant, an ambiguous verdict
 //!   when the best two cannot be told apart.
@@ -22,6 +24,7 @@
 //! Like the rest of the crate it does no I/O: records come in as slices, results go out as
 //! values (serialisable with `serde`).
 
+pub mod benchmark;
 pub mod localise;
 pub mod run;
 pub mod screen;
