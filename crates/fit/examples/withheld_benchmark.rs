@@ -4,13 +4,15 @@
 //! held-out NRMSE after/before of correctly named effects.
 //!
 //! ```text
-//! cargo run --release -p fit --example withheld_benchmark -- [SEED] [N]
+//! cargo run --release -p fit --example withheld_benchmark -- [SEED] [N] [CASE]
 //! ```
+//!
+//! With CASE, only that case is diagnosed and every candidate of every stage printed.
 //!
 //! (default seed 1, 160 cases: 20 `none`, 20 with two effects, 120 with one; heavy — minutes
 //! per ten cases on two cores). One line per case as it finishes, the summary at the end.
 
-use fit::diagnose::benchmark::{run_case, CaseOutcome, Summary};
+use fit::diagnose::benchmark::{diagnose_case, run_case, CaseOutcome, Summary};
 use fit::diagnose::DiagnoseSettings;
 use motor_model::withheld::benchmark_case;
 
@@ -19,6 +21,30 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seed: u64 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(1);
     let n: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(160);
     let settings = DiagnoseSettings::default();
+    if let Some(index) = args.next().map(|s| s.parse::<usize>()).transpose()? {
+        let case = benchmark_case(seed, index, n)?;
+        println!("case {index}: truth {:?}", case.truth());
+        let d = diagnose_case(&case, &settings)?;
+        for stage in &d.stages {
+            println!(
+                "stage on top of {:?}: verdict {:?}",
+                stage.base, stage.verdict.verdict
+            );
+            for c in &stage.candidates {
+                println!(
+                    "  {:<22} {:<31} score {:>10.3e}  LR p {:.2e}  held-out {:.4} -> {:.4}  {}",
+                    c.name,
+                    c.assessment.words(),
+                    c.screening.map_or(f64::NAN, |s| s.statistic),
+                    c.p_value,
+                    c.heldout_nrmse_before,
+                    c.heldout_nrmse_after,
+                    c.failure.as_deref().unwrap_or("")
+                );
+            }
+        }
+        return Ok(());
+    }
     let mut outcomes: Vec<CaseOutcome> = Vec::with_capacity(n);
     for i in 0..n {
         let case = benchmark_case(seed, i, n)?;

@@ -15,7 +15,7 @@ use motor_model::withheld::{generate, CaseRecords, CaseSpec};
 use motor_model::{Input, Record, EFFECT_NAMES};
 use serde::Serialize;
 
-use crate::diagnose::run::{diagnose, DiagnoseSettings};
+use crate::diagnose::run::{diagnose, DiagnoseSettings, Diagnosis};
 use crate::output_error::{equation_error_start, voltage_input, ExcitedRecord};
 
 /// One case diagnosed.
@@ -117,6 +117,21 @@ fn diagnose_records(
     case: &CaseSpec,
     settings: &DiagnoseSettings,
 ) -> Result<(Vec<String>, Option<f64>), String> {
+    let d = diagnose_case(case, settings)?;
+    let named: Vec<String> = d.named().iter().map(|s| s.to_string()).collect();
+    let ratio = named.first().and_then(|name| {
+        d.stages
+            .first()?
+            .candidates
+            .iter()
+            .find(|c| c.name == name.as_str())
+            .map(|c| c.heldout_nrmse_after / c.heldout_nrmse_before)
+    });
+    Ok((named, ratio))
+}
+
+/// The diagnosis of `case`'s records (module docs), or why it could not be made.
+pub fn diagnose_case(case: &CaseSpec, settings: &DiagnoseSettings) -> Result<Diagnosis, String> {
     let CaseRecords {
         high,
         low,
@@ -133,18 +148,7 @@ fn diagnose_records(
     let train_x: Vec<ExcitedRecord<'_>> = train.iter().map(Owned::excited).collect();
     let held_x: Vec<ExcitedRecord<'_>> = held.iter().map(Owned::excited).collect();
     let start = equation_error_start(&train_x).map_err(|e| e.to_string())?;
-    let d =
-        diagnose(&train_x, &held_x, &[], &start, settings, &|_| {}).map_err(|e| e.to_string())?;
-    let named: Vec<String> = d.named().iter().map(|s| s.to_string()).collect();
-    let ratio = named.first().and_then(|name| {
-        d.stages
-            .first()?
-            .candidates
-            .iter()
-            .find(|c| c.name == name.as_str())
-            .map(|c| c.heldout_nrmse_after / c.heldout_nrmse_before)
-    });
-    Ok((named, ratio))
+    diagnose(&train_x, &held_x, &[], &start, settings, &|_| {}).map_err(|e| e.to_string())
 }
 
 /// The benchmark's scores (module docs).

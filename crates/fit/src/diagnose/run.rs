@@ -710,6 +710,10 @@ fn localise_all(
     localise(&records, settings)
 }
 
+/// A candidate's report, its held-out block errors and its training likelihood-ratio
+/// statistic (empty and `None` when it was not refitted, or its refit failed).
+type Refit = (CandidateReport, Vec<f64>, Option<f64>);
+
 /// The screening of `kinds` on top of `base` (see [`crate::diagnose::screen`]), in their
 /// order: `None` for a candidate whose signature could not be simulated, and for every one
 /// when the base model cannot be linearised (those are refitted unscreened).
@@ -825,7 +829,7 @@ fn run_stage(
         done: 0,
         total: refit_set.len(),
     });
-    let refit = |k: usize| -> (CandidateReport, Vec<f64>, Option<f64>) {
+    let refit = |k: usize| -> Refit {
         let kind = kinds[k];
         let effect = candidate_start(kind, &base.motor, base.train, localisation);
         let effects = base.effects.with(effect);
@@ -923,39 +927,37 @@ fn run_stage(
     };
     // The refits in parallel, at most `threads` at a time.
     let threads = settings.threads.max(1);
-    let mut refitted: Vec<(usize, (CandidateReport, Vec<f64>, Option<f64>))> =
-        Vec::with_capacity(refit_set.len());
+    let mut refitted: Vec<(usize, Refit)> = Vec::with_capacity(refit_set.len());
     for chunk in refit_set.chunks(threads) {
-        let part: Vec<(usize, (CandidateReport, Vec<f64>, Option<f64>))> =
-            std::thread::scope(|scope| {
-                let handles: Vec<_> = chunk
-                    .iter()
-                    .map(|&k| scope.spawn(move || refit(k)))
-                    .collect();
-                handles
-                    .into_iter()
-                    .zip(chunk)
-                    .map(|(h, &k)| {
-                        let result = h.join().unwrap_or_else(|_| {
-                            (
-                                unfitted(
-                                    k,
-                                    base.effects,
-                                    by_score(k, Assessment::Unresolved),
-                                    Some("the refit stopped unexpectedly".into()),
-                                ),
-                                Vec::new(),
-                                None,
-                            )
-                        });
-                        (k, result)
-                    })
-                    .collect()
-            });
+        let part: Vec<(usize, Refit)> = std::thread::scope(|scope| {
+            let handles: Vec<_> = chunk
+                .iter()
+                .map(|&k| scope.spawn(move || refit(k)))
+                .collect();
+            handles
+                .into_iter()
+                .zip(chunk)
+                .map(|(h, &k)| {
+                    let result = h.join().unwrap_or_else(|_| {
+                        (
+                            unfitted(
+                                k,
+                                base.effects,
+                                by_score(k, Assessment::Unresolved),
+                                Some("the refit stopped unexpectedly".into()),
+                            ),
+                            Vec::new(),
+                            None,
+                        )
+                    });
+                    (k, result)
+                })
+                .collect()
+        });
         refitted.extend(part);
     }
     // Every candidate in the order given: refitted, or reported with its screening score.
-    let results: Vec<(CandidateReport, Vec<f64>, Option<f64>)> = (0..kinds.len())
+    let results: Vec<Refit> = (0..kinds.len())
         .map(|k| match refitted.iter().position(|(j, _)| *j == k) {
             Some(at) => refitted.swap_remove(at).1,
             None => (

@@ -136,7 +136,7 @@ impl BaseProjection {
             .iter()
             .copied()
             .fold(f64::INFINITY, f64::min);
-        if !(smallest >= MIN_TESTABLE_EIGENVALUE) {
+        if smallest.is_nan() || smallest < MIN_TESTABLE_EIGENVALUE {
             return untestable;
         }
         let along = eigen.eigenvectors.tr_mul(&b);
