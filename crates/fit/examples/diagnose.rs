@@ -36,26 +36,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         d.named(),
         t0.elapsed().as_secs_f64()
     );
-    for stage in &d.stages {
-        println!(
-            "stage on top of {:?}: verdict {:?}, ambiguous with {:?}",
-            stage.base, stage.verdict.verdict, stage.verdict.ambiguous_with
-        );
-        for c in &stage.candidates {
-            println!(
-                "  {:<22} {:<31} score {:>10.2e} p {:.2e}  train {:.4}→{:.4}  held-out {:.4}→{:.4}  {:?} {}",
-                c.name,
-                c.assessment.words(),
-                c.screening.map_or(f64::NAN, |s| s.statistic),
-                c.p_value,
-                c.train_nrmse_before,
-                c.train_nrmse_after,
-                c.heldout_nrmse_before,
-                c.heldout_nrmse_after,
-                c.params.iter().map(|p| (p.symbol, p.value)).collect::<Vec<_>>(),
-                c.failure.as_deref().unwrap_or("")
-            );
-        }
-    }
+    records::print_stages(&d);
     Ok(())
 }

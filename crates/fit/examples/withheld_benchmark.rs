@@ -16,6 +16,9 @@ use fit::diagnose::benchmark::{diagnose_case, run_case, CaseOutcome, Summary};
 use fit::diagnose::DiagnoseSettings;
 use motor_model::withheld::benchmark_case;
 
+#[path = "../tests/common/diagnose_records.rs"]
+mod records;
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let seed: u64 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(1);
@@ -25,24 +28,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let case = benchmark_case(seed, index, n)?;
         println!("case {index}: truth {:?}", case.truth());
         let d = diagnose_case(&case, &settings)?;
-        for stage in &d.stages {
-            println!(
-                "stage on top of {:?}: verdict {:?}",
-                stage.base, stage.verdict.verdict
-            );
-            for c in &stage.candidates {
-                println!(
-                    "  {:<22} {:<31} score {:>10.3e}  LR p {:.2e}  held-out {:.4} -> {:.4}  {}",
-                    c.name,
-                    c.assessment.words(),
-                    c.screening.map_or(f64::NAN, |s| s.statistic),
-                    c.p_value,
-                    c.heldout_nrmse_before,
-                    c.heldout_nrmse_after,
-                    c.failure.as_deref().unwrap_or("")
-                );
-            }
-        }
+        records::print_stages(&d);
         return Ok(());
     }
     let mut outcomes: Vec<CaseOutcome> = Vec::with_capacity(n);

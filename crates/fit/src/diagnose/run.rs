@@ -881,13 +881,6 @@ fn run_stage(
                 };
                 (
                     CandidateReport {
-                        name: kind.name(),
-                        assessment,
-                        testable: assessment != Assessment::NotTestable,
-                        significant: false,
-                        screening: screen_of(k),
-                        p_value: 1.0,
-                        heldout_p_value: 1.0,
                         params: own
                             .iter()
                             .map(|e| EffectParam {
@@ -898,14 +891,11 @@ fn run_stage(
                                 ci95: e.ci95,
                             })
                             .collect(),
-                        train_nrmse_before: train_before,
                         train_nrmse_after: nrmse_summary(&pred, train_mask),
-                        heldout_nrmse_before: heldout_before,
                         heldout_nrmse_after: nrmse_summary(&pred, held_mask),
                         motor_shift,
                         motor: Some(fit.params),
-                        effects: fit.effects,
-                        failure: None,
+                        ..unfitted(k, fit.effects, assessment, None)
                     },
                     if determined(&own) { sse } else { Vec::new() },
                     statistic,

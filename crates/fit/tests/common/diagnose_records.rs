@@ -1,8 +1,10 @@
 //! Three step records of a small servo through the paper's logger, for the diagnosis's
-//! example and bench: 12 V, 3 V and 0.6 V, each 1 s at 5 kHz (5,001 samples), the step at 50 ms.
+//! examples and bench: 12 V, 3 V and 0.6 V, each 1 s at 5 kHz (5,001 samples), the step at 50 ms;
+//! and the examples' table of every candidate of every stage.
 
 #![allow(dead_code)]
 
+use fit::diagnose::Diagnosis;
 use fit::{voltage_input, ExcitedRecord};
 use motor_model::{Effects, Input, MeasurementModel, MotorParams, Record};
 
@@ -43,4 +45,30 @@ pub fn excited(records: &[(Input, Record)]) -> Vec<ExcitedRecord<'_>> {
             exclude_speed: None,
         })
         .collect()
+}
+
+/// Prints every candidate of every stage of `d`: its assessment, screening score, refit p-value,
+/// training and held-out NRMSE before and after, and fitted parameters.
+pub fn print_stages(d: &Diagnosis) {
+    for stage in &d.stages {
+        println!(
+            "stage on top of {:?}: verdict {:?}, ambiguous with {:?}",
+            stage.base, stage.verdict.verdict, stage.verdict.ambiguous_with
+        );
+        for c in &stage.candidates {
+            println!(
+                "  {:<22} {:<31} score {:>10.2e} p {:.2e}  train {:.4}→{:.4}  held-out {:.4}→{:.4}  {:?} {}",
+                c.name,
+                c.assessment.words(),
+                c.screening.map_or(f64::NAN, |s| s.statistic),
+                c.p_value,
+                c.train_nrmse_before,
+                c.train_nrmse_after,
+                c.heldout_nrmse_before,
+                c.heldout_nrmse_after,
+                c.params.iter().map(|p| (p.symbol, p.value)).collect::<Vec<_>>(),
+                c.failure.as_deref().unwrap_or("")
+            );
+        }
+    }
 }
