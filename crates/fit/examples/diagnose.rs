@@ -5,36 +5,19 @@
 use std::time::Instant;
 
 use fit::diagnose::{diagnose, DiagnoseProgress, DiagnoseSettings};
-use fit::{equation_error_start, voltage_input, ExcitedRecord};
-use motor_model::{Effect, Effects, Input, MeasurementModel, MotorParams, Record};
+use fit::equation_error_start;
+use motor_model::{Effect, Effects};
+
+#[path = "../tests/common/diagnose_records.rs"]
+mod records;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let spec = std::env::args()
         .nth(1)
         .unwrap_or_else(|| "quadratic_drag:c=2e-7".into());
     let effect: Effect = spec.parse()?;
-    let motor = MotorParams::new(2.0, 2e-3, 0.05, 4e-4, 2e-5, 4e-3)?;
-    let effects = Effects::none().with(effect);
-    let mut records: Vec<(Input, Record)> = Vec::new();
-    for (k, volts) in [12.0, 3.0, 0.6].iter().enumerate() {
-        let input = Input::step(*volts, 0.05)?;
-        let trace = motor_model::simulate(&motor, effects, &input, 1.0, 5000.0)?;
-        let record = MeasurementModel::paper_logger(&trace, 10 + k as u64).apply(&trace)?;
-        let input = voltage_input(&record.t, &record.voltage)?;
-        records.push((input, record));
-    }
-    let excited: Vec<ExcitedRecord<'_>> = records
-        .iter()
-        .map(|(input, r)| ExcitedRecord {
-            input,
-            dt: 2e-4,
-            current: &r.current,
-            speed: None,
-            position: r.position.as_deref(),
-            exclude_current: None,
-            exclude_speed: None,
-        })
-        .collect();
+    let records = records::servo_steps(Effects::none().with(effect))?;
+    let excited = records::excited(&records);
     let t0 = Instant::now();
     let start = equation_error_start(&excited)?;
     let progress =
@@ -53,26 +36,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         d.named(),
         t0.elapsed().as_secs_f64()
     );
-    for stage in &d.stages {
-        println!(
-            "stage on top of {:?}: verdict {:?}, ambiguous with {:?}",
-            stage.base, stage.verdict.verdict, stage.verdict.ambiguous_with
-        );
-        for c in &stage.candidates {
-            println!(
-                "  {:<22} testable {:<5} sig {:<5} p {:.2e}  train {:.4}→{:.4}  held-out {:.4}→{:.4}  {:?} {}",
-                c.name,
-                c.testable,
-                c.significant,
-                c.p_value,
-                c.train_nrmse_before,
-                c.train_nrmse_after,
-                c.heldout_nrmse_before,
-                c.heldout_nrmse_after,
-                c.params.iter().map(|p| (p.symbol, p.value)).collect::<Vec<_>>(),
-                c.failure.as_deref().unwrap_or("")
-            );
-        }
-    }
+    records::print_stages(&d);
     Ok(())
 }

@@ -222,6 +222,9 @@ struct OeProblem {
     /// follow the simulated speed ([`Simulator::with_speed_bound`]); `None` without a speed
     /// channel.
     speed_bound: Option<f64>,
+    /// RK4 steps this many times the simulator's default ([`Simulator::with_step_factor`]; 1
+    /// for every fit but the diagnosis's).
+    step_factor: f64,
 }
 
 impl OeProblem {
@@ -257,6 +260,7 @@ impl OeProblem {
             n_residuals,
             max_step_bits,
             speed_bound,
+            step_factor: 1.0,
         })
     }
 
@@ -365,7 +369,10 @@ impl OeProblem {
         effects: Effects,
         input: Input,
     ) -> Result<Simulator, motor_model::ModelError> {
-        let sim = Simulator::new(motor, effects, input)?;
+        let mut sim = Simulator::new(motor, effects, input)?;
+        if self.step_factor != 1.0 {
+            sim = sim.with_step_factor(self.step_factor)?;
+        }
         match self.speed_bound {
             Some(w) => sim.with_speed_bound(w),
             None => Ok(sim),
@@ -466,11 +473,19 @@ impl OeProblem {
     fn jacobian(&self, theta: &[f64]) -> Option<(Vec<f64>, DMatrix<f64>)> {
         let (motor, effects) = self.parameters.decode(theta)?;
         self.set_step_for(&motor, &effects)?;
+        let all: Vec<usize> = (0..self.parameters.len()).collect();
+        self.jacobian_columns(theta, &all)
+    }
+
+    /// Residuals at `theta` and the columns `which` of their Jacobian in θ (forward
+    /// differences, the perturbed simulations run in parallel), on the RK4 step in use.
+    fn jacobian_columns(&self, theta: &[f64], which: &[usize]) -> Option<(Vec<f64>, DMatrix<f64>)> {
         let r0 = self.residuals(theta)?;
-        let p = self.parameters.len();
+        let p = which.len();
         let columns: Vec<Option<Vec<f64>>> = std::thread::scope(|scope| {
-            let handles: Vec<_> = (0..p)
-                .map(|j| {
+            let handles: Vec<_> = which
+                .iter()
+                .map(|&j| {
                     let r0 = &r0;
                     scope.spawn(move || {
                         let mut th = theta.to_vec();
@@ -613,6 +628,17 @@ pub fn predict_output_error(
     motor: &MotorParams,
     effects: &Effects,
 ) -> Result<Vec<FittedChannel>, FitError> {
+    predict_with_step_factor(records, motor, effects, 1.0)
+}
+
+/// [`predict_output_error`] on RK4 steps `step_factor` times the simulator's default
+/// ([`Simulator::with_step_factor`]).
+pub(crate) fn predict_with_step_factor(
+    records: &[ExcitedRecord<'_>],
+    motor: &MotorParams,
+    effects: &Effects,
+    step_factor: f64,
+) -> Result<Vec<FittedChannel>, FitError> {
     let all: Vec<ExcitedRecord<'_>> = records
         .iter()
         .map(|r| ExcitedRecord {
@@ -621,7 +647,8 @@ pub fn predict_output_error(
             ..*r
         })
         .collect();
-    let problem = OeProblem::new(&all, effects, f64::INFINITY)?;
+    let mut problem = OeProblem::new(&all, effects, f64::INFINITY)?;
+    problem.step_factor = step_factor;
     problem.set_step_for(motor, effects).ok_or_else(|| {
         bad(
             "motor",
@@ -637,6 +664,80 @@ pub fn predict_output_error(
         ));
     }
     Ok(fitted)
+}
+
+/// The output-error model of some records linearised at one point (see
+/// [`output_error_sensitivity`]).
+pub(crate) struct Sensitivity {
+    /// Weighted residuals `(simulated − measured)/σ` at the fitted samples, in record, channel,
+    /// sample order.
+    pub residuals: Vec<f64>,
+    /// Their derivatives in θ (forward differences), one column per parameter asked for.
+    pub jacobian: DMatrix<f64>,
+    /// Length of each channel's run of residuals, in order (for correlation factors).
+    pub series: Vec<usize>,
+}
+
+/// The residuals of `records` for `motor` with `effects` and their Jacobian in θ (the
+/// coordinates of [`identify_output_error_with_effects`]): every column, or with `of` only the
+/// columns of that effect's fitted parameters. Each channel is weighted by its σ in `sigmas`
+/// (`(record, channel, σ)`, the channel's own scatter where missing). The RK4 step is the one
+/// a fit from this point with `step_factor` would take ([`Simulator::with_step_factor`]).
+/// What a score test needs: the residual and the
+/// signatures of parameters at a point, without a fit.
+pub(crate) fn output_error_sensitivity(
+    records: &[ExcitedRecord<'_>],
+    motor: &MotorParams,
+    effects: &Effects,
+    sigmas: &[(usize, Channel, f64)],
+    of: Option<motor_model::EffectKind>,
+    step_factor: f64,
+) -> Result<Sensitivity, FitError> {
+    let mut problem = OeProblem::new(records, effects, f64::INFINITY)?;
+    for (k, rec) in problem.records.iter_mut().enumerate() {
+        for ch in &mut rec.channels {
+            if let Some(s) = sigmas
+                .iter()
+                .find(|(r, c, s)| *r == k && *c == ch.kind && *s > 0.0 && s.is_finite())
+            {
+                ch.sigma = s.2;
+            }
+        }
+    }
+    let theta = problem.parameters.encode(motor, effects)?;
+    let not_simulable = || {
+        bad(
+            "motor",
+            "a time constant far below the sample period: the records cannot show it".into(),
+        )
+    };
+    problem.step_factor = step_factor;
+    problem
+        .set_step_for(motor, effects)
+        .ok_or_else(not_simulable)?;
+    let which: Vec<usize> = match of {
+        None => (0..problem.parameters.len()).collect(),
+        Some(kind) => problem
+            .parameters
+            .slot_kinds()
+            .enumerate()
+            .filter(|(_, k)| *k == kind)
+            .map(|(j, _)| crate::parameters::MOTOR + j)
+            .collect(),
+    };
+    let (residuals, jacobian) = problem
+        .jacobian_columns(&theta, &which)
+        .ok_or_else(not_simulable)?;
+    let series = problem
+        .records
+        .iter()
+        .flat_map(|r| r.channels.iter().map(|c| c.data.len()))
+        .collect();
+    Ok(Sensitivity {
+        residuals,
+        jacobian,
+        series,
+    })
 }
 
 /// Checks record `k` (0-based): aligned, finite channels of enough samples, a positive period.
@@ -780,6 +881,20 @@ pub fn identify_output_error_with_initial_states(
     effects: &Effects,
     settings: LmSettings,
 ) -> Result<FullFit, FitError> {
+    fit_output_error(records, priors, initial, start, effects, settings, 1.0)
+}
+
+/// [`identify_output_error_with_initial_states`] on RK4 steps `step_factor` times the
+/// simulator's default ([`Simulator::with_step_factor`]).
+pub(crate) fn fit_output_error(
+    records: &[ExcitedRecord<'_>],
+    priors: &[Vec<LevelPrior>],
+    initial: &[InitialState],
+    start: &MotorParams,
+    effects: &Effects,
+    settings: LmSettings,
+    step_factor: f64,
+) -> Result<FullFit, FitError> {
     if !priors.is_empty() && priors.len() != records.len() {
         return Err(bad(
             "level priors",
@@ -794,6 +909,7 @@ pub fn identify_output_error_with_initial_states(
         return Err(bad("records", "no record given".into()));
     }
     let mut problem = OeProblem::new(records, effects, f64::INFINITY)?;
+    problem.step_factor = step_factor;
     problem.set_initial_states(initial, effects)?;
     let theta0 = problem.with_state_guesses(problem.parameters.encode(start, effects)?);
     let h = problem
@@ -935,6 +1051,9 @@ impl NuisanceProblem for OeProblem {
     }
 }
 
+/// RK4 steps of [`equation_error_start`]'s simulations, as a multiple of the simulator's
+/// default ([`Simulator::with_step_factor`]).
+const START_STEP_FACTOR: f64 = 8.0;
 /// Cut-offs tried by [`equation_error_start`], as fractions of the sample rate.
 const START_CUTOFFS: [f64; 4] = [0.1, 0.02, 0.004, 0.0008];
 
@@ -961,6 +1080,8 @@ pub fn equation_error_start_with_initial_states(
 ) -> Result<MotorParams, FitError> {
     let mut problem = OeProblem::new(records, &Effects::none(), f64::INFINITY)?;
     problem.set_initial_states(initial, &Effects::none())?;
+    // Telling four starts apart by their cost needs no more than noise-level accuracy.
+    problem.step_factor = START_STEP_FACTOR;
     let mut best: Option<(f64, MotorParams)> = None;
     let mut first_error = None;
     for fraction in START_CUTOFFS {

@@ -90,6 +90,11 @@ impl Parameters {
         MOTOR + self.slots.len()
     }
 
+    /// The effect each fitted effect parameter belongs to, in θ order after the motor's six.
+    pub fn slot_kinds(&self) -> impl Iterator<Item = EffectKind> + '_ {
+        self.slots.iter().map(|(k, _)| *k)
+    }
+
     /// θ of `motor` with the fitted values of `effects` (the same effects as these
     /// parameters'), refusing values the transforms cannot carry.
     pub fn encode(&self, motor: &MotorParams, effects: &Effects) -> Result<Vec<f64>, FitError> {

@@ -112,15 +112,21 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
     };
     let t0 = Instant::now();
     let quiet = s.quiet;
+    // Progress on standard error once the diagnosis has taken more than a second.
     let progress = move |p: DiagnoseProgress| {
-        if quiet {
+        let elapsed = t0.elapsed().as_secs_f64();
+        if quiet || elapsed < 1.0 {
             return;
         }
         match p {
-            DiagnoseProgress::Nominal => eprintln!("diagnose: fitting the nominal model"),
+            DiagnoseProgress::Nominal => {
+                eprintln!("diagnose: fitting the nominal model ({elapsed:.1} s)")
+            }
+            DiagnoseProgress::Screening { stage } => {
+                eprintln!("diagnose: effect {stage}: screening the candidates ({elapsed:.1} s)")
+            }
             DiagnoseProgress::Candidates { stage, done, total } if done > 0 => eprintln!(
-                "diagnose: effect {stage}: {done}/{total} candidates refitted ({:.1} s)",
-                t0.elapsed().as_secs_f64()
+                "diagnose: effect {stage}: {done}/{total} candidates refitted ({elapsed:.1} s)"
             ),
             DiagnoseProgress::Candidates { .. } => {}
         }
@@ -155,7 +161,9 @@ fn report_json(d: &Diagnosis) -> serde_json::Value {
                     json!({
                         "name": c.name,
                         "significant": c.significant,
+                        "assessment": c.assessment,
                         "testable": c.testable,
+                        "screening": c.screening,
                         "p_value": c.p_value,
                         "heldout_p_value": c.heldout_p_value,
                         "params": c.params.iter().map(|p| json!({
@@ -282,29 +290,37 @@ fn print_report(d: &Diagnosis, seconds: f64) {
             }
         );
         println!(
-            "  {:<22} {:>5} {:>9} {:>17} {:>17}  parameters",
-            "effect", "sig.", "p", "train NRMSE", "held-out NRMSE"
+            "  {:<22} {:<20} {:>9} {:>9} {:>17} {:>17}  parameters",
+            "effect", "assessment", "score", "p", "train NRMSE", "held-out NRMSE"
         );
         for c in &stage.candidates {
-            let params = if let Some(why) = &c.failure {
-                format!("not testable from these records: {why}")
-            } else {
-                c.params
-                    .iter()
-                    .map(|p| format!("{} {:.3e} {}", p.symbol, p.value, p.unit))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            };
+            let score = c
+                .screening
+                .map_or("-".to_string(), |s| format!("{:.3e}", s.statistic));
+            if !c.refitted() {
+                println!(
+                    "  {:<22} {:<20} {score:>9} {:>9}  {}",
+                    c.name,
+                    c.assessment.words(),
+                    "-",
+                    c.failure
+                        .as_ref()
+                        .map_or("not refitted".to_string(), |why| format!(
+                            "refit failed: {why}"
+                        ))
+                );
+                continue;
+            }
+            let params = c
+                .params
+                .iter()
+                .map(|p| format!("{} {:.3e} {}", p.symbol, p.value, p.unit))
+                .collect::<Vec<_>>()
+                .join(", ");
             println!(
-                "  {:<22} {:>5} {:>9.2e} {:>8.4} → {:<6.4} {:>8.4} → {:<6.4}  {params}",
+                "  {:<22} {:<20} {score:>9} {:>9.2e} {:>8.4} → {:<6.4} {:>8.4} → {:<6.4}  {params}",
                 c.name,
-                if c.significant {
-                    "yes"
-                } else if c.testable {
-                    "no"
-                } else {
-                    "-"
-                },
+                c.assessment.words(),
                 c.p_value,
                 c.train_nrmse_before,
                 c.train_nrmse_after,

@@ -11,8 +11,12 @@
 //!   frequency and shaft angle, with the whiteness and input cross-correlation of MATLAB's
 //!   `resid`. Each part carries a test that separates a real gap from noise.
 //! - [`diagnose`] ([`run`]): the whole diagnosis — the nominal fit, the localisation, every
-//!   candidate refitted with the motor on training data and judged on held-out data, stage
+//!   candidate screened, the best refitted with the motor on training data and judged on held-out data, stage
 //!   after stage.
+//! - [`screen`]: the score test of every candidate at the base model, which decides the few
+//!   that are refitted in full.
+//! - [`benchmark`]: the diagnosis scored on cases whose effect it is not told
+//!   ([`motor_model::withheld`]).
 //! - [`verdict`]: *which* — candidate effects ranked by their held-out improvement, each with a
 //!   paired test against the noise, `none` when nothing is significant, an ambiguous verdict
 //!   when the best two cannot be told apart.
@@ -20,11 +24,13 @@
 //! Like the rest of the crate it does no I/O: records come in as slices, results go out as
 //! values (serialisable with `serde`).
 
+pub mod benchmark;
 pub mod localise;
 pub mod run;
+pub mod screen;
 pub mod verdict;
 
 pub use run::{
-    diagnose, CandidateReport, DiagnoseError, DiagnoseProgress, DiagnoseSettings, Diagnosis,
-    EffectParam, ParamShift, Stage,
+    diagnose, Assessment, CandidateReport, DiagnoseError, DiagnoseProgress, DiagnoseSettings,
+    Diagnosis, EffectParam, ParamShift, Stage,
 };

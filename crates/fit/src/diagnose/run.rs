@@ -13,9 +13,13 @@
 //! **Candidates** start from the nominal motor and a small size of each effect, its shape
 //! parameters from the records (the cogging period count from the residual's ripple per
 //! revolution, time constants from the record span and sample period, speeds and currents from
-//! their peaks). A candidate whose refit leaves its size undetermined (no interval, or an
-//! interval wider than a hundred times its value) is *not testable from these records* rather
-//! than absent.
+//! their peaks). Each stage first *screens* every candidate by its score statistic at the base
+//! model ([`crate::diagnose::screen`]: one linearisation, no fit); only the best
+//! [`DiagnoseSettings::refits`] are refitted with the motor and judged by the verdict's tests.
+//! A candidate is *not testable from these records* when its signature is lost in the base
+//! model's (screening); one that is testable but whose refit leaves its parameters undetermined
+//! (no interval, or one wider than a hundred times its value) reads *tested, no evidence* when
+//! its screening score is below the level, *unresolved* otherwise.
 
 use motor_model::{
     BrushDrop, CoggingTorque, CurrentSensorLag, Effect, EffectKind, Effects, InductanceSaturation,
@@ -26,12 +30,13 @@ use serde::Serialize;
 use crate::diagnose::localise::{
     correlation_factor, localise, Localisation, LocaliseSettings, ResidualChannel, ResidualRecord,
 };
+use crate::diagnose::screen::{BaseProjection, Screening, CORRELATION_LAGS};
 use crate::diagnose::verdict::{rank_candidates, CandidateScore, Verdict, VerdictSettings};
 use crate::error::FitError;
 use crate::full_model::{Channel, FittedChannel, FullFit, PARAM_NAMES};
 use crate::lm::LmSettings;
 use crate::output_error::{
-    identify_output_error_with_effects, predict_output_error, ExcitedRecord,
+    fit_output_error, output_error_sensitivity, predict_with_step_factor, ExcitedRecord,
 };
 use crate::parameters::EffectEstimate;
 
@@ -54,6 +59,19 @@ pub struct DiagnoseSettings {
     pub lm: LmSettings,
     /// Candidates refitted at the same time (default: the machine's parallelism).
     pub threads: usize,
+    /// Candidates refitted in full at each stage, the best by their screening score (default
+    /// 2; the others are reported with their score alone). At least the number of candidates
+    /// refits every one.
+    pub refits: usize,
+    /// RK4 steps of every simulation of the diagnosis (fits, predictions, screening) this
+    /// many times the simulator's default of 1/40 of the fastest time constant
+    /// ([`motor_model::Simulator::with_step_factor`]; default 8: about 1e-6 of the response,
+    /// far below a record's noise).
+    pub step_factor: f64,
+    /// A candidate is refitted only if its screening p-value is below this (default 0.05,
+    /// without the multiple-test correction the verdict applies: lenient, so that a candidate
+    /// whose linearisation understates it still gets its refit).
+    pub screening_alpha: f64,
 }
 
 impl Default for DiagnoseSettings {
@@ -67,6 +85,9 @@ impl Default for DiagnoseSettings {
             localise: LocaliseSettings::default(),
             lm: LmSettings::default(),
             threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            refits: 2,
+            step_factor: 8.0,
+            screening_alpha: 0.05,
         }
     }
 }
@@ -76,7 +97,13 @@ impl Default for DiagnoseSettings {
 pub enum DiagnoseProgress {
     /// The nominal model is being fitted.
     Nominal,
-    /// Stage `stage` (1 for the first effect): `done` of `total` candidates refitted.
+    /// Stage `stage` (1 for the first effect): every candidate is being screened.
+    Screening {
+        /// Which effect is being looked for (1 = first).
+        stage: usize,
+    },
+    /// Stage `stage` (1 for the first effect): `done` of `total` candidates refitted (those
+    /// the screening kept).
     Candidates {
         /// Which effect is being looked for (1 = first).
         stage: usize,
@@ -115,15 +142,52 @@ pub struct EffectParam {
     pub ci95: Option<[f64; 2]>,
 }
 
-/// One candidate effect refitted with the motor.
+/// What a stage concluded about one candidate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Assessment {
+    /// Refitted, and its improvement is significant on training and held-out data.
+    Significant,
+    /// Tested, no significant evidence of it: its refit does not improve the data
+    /// significantly, or its screening score is below the level (an absent effect whose shape
+    /// parameters no refit could pin down reads so too).
+    NoEvidence,
+    /// Its screening score is significant, but better-scoring candidates took the refits.
+    ScreenedOut,
+    /// Its screening score is significant, but its refit failed or left its parameters
+    /// undetermined.
+    Unresolved,
+    /// The records cannot determine it ([`crate::diagnose::screen`]).
+    NotTestable,
+}
+
+impl Assessment {
+    /// In words, for reports.
+    pub fn words(self) -> &'static str {
+        match self {
+            Assessment::Significant => "significant",
+            Assessment::NoEvidence => "tested, no evidence",
+            Assessment::ScreenedOut => "screened out",
+            Assessment::Unresolved => "unresolved",
+            Assessment::NotTestable => "not testable from these records",
+        }
+    }
+}
+
+/// One candidate effect: its screening score and, when refitted with the motor, the refit.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct CandidateReport {
     /// The effect's name.
     pub name: &'static str,
-    /// Whether the records determine its size (module docs).
+    /// What the stage concluded about it.
+    pub assessment: Assessment,
+    /// Whether the records can test it (every assessment but [`Assessment::NotTestable`]).
     pub testable: bool,
     /// Whether its held-out improvement is significant (see [`Verdict`]).
     pub significant: bool,
+    /// Its screening score at the stage's base model (`None` when the base model could not
+    /// be linearised and every candidate was refitted).
+    pub screening: Option<Screening>,
     /// p-value of its training likelihood-ratio test (see [`crate::diagnose::verdict`]).
     pub p_value: f64,
     /// One-sided p-value of its held-out improvement.
@@ -148,6 +212,13 @@ pub struct CandidateReport {
     pub effects: Effects,
     /// Why the refit failed, if it did.
     pub failure: Option<String>,
+}
+
+impl CandidateReport {
+    /// Whether it was refitted (its refit's figures are set).
+    pub fn refitted(&self) -> bool {
+        self.motor.is_some()
+    }
 }
 
 /// One stage of the search: the candidates on top of the effects found so far, and its verdict.
@@ -299,9 +370,6 @@ fn block_sse(
     }
     sums.into_values().collect()
 }
-
-/// Lags of the residual autocorrelation behind the correlation factor.
-const CORRELATION_LAGS: usize = 25;
 
 /// The training likelihood-ratio statistic of a refit (see [`crate::diagnose::verdict`]): the
 /// fall of the weighted squared error over the training samples from `before` to `after`,
@@ -496,7 +564,15 @@ pub fn diagnose(
     };
 
     progress(DiagnoseProgress::Nominal);
-    let nominal = identify_output_error_with_effects(&train, start, &Effects::none(), settings.lm)?;
+    let nominal = fit_output_error(
+        &train,
+        &[],
+        &[],
+        start,
+        &Effects::none(),
+        settings.lm,
+        settings.step_factor,
+    )?;
     // A channel the nominal model explains worse than its mean is what an unmodelled effect
     // can do: diagnosed, and said (`nominal_note`). Any other failure stops here.
     let nominal_note = match (&nominal.refusal, nominal.failure()) {
@@ -508,7 +584,12 @@ pub fn diagnose(
         }
         (_, Some(why)) => return Err(DiagnoseError::NominalFailed(why)),
     };
-    let nominal_all = predict_output_error(&all, &nominal.params, &Effects::none())?;
+    let nominal_all = predict_with_step_factor(
+        &all,
+        &nominal.params,
+        &Effects::none(),
+        settings.step_factor,
+    )?;
     // The noise level of each channel, as the nominal fit weighted it: the same for every
     // candidate, so that their held-out errors compare.
     let sigmas: Vec<(usize, Channel, f64)> = nominal
@@ -559,7 +640,7 @@ pub fn diagnose(
             break;
         };
         // The next stage starts from the model with the chosen effect.
-        let fitted = predict_output_error(&all, &motor, &effects)?;
+        let fitted = predict_with_step_factor(&all, &motor, &effects, settings.step_factor)?;
         base = Base {
             motor,
             effects,
@@ -630,7 +711,49 @@ fn localise_all(
     localise(&records, settings)
 }
 
-/// One stage: every candidate refitted on top of `base` (in parallel), then ranked.
+/// A candidate's report, its held-out block errors and its training likelihood-ratio
+/// statistic (empty and `None` when it was not refitted, or its refit failed).
+type Refit = (CandidateReport, Vec<f64>, Option<f64>);
+
+/// The screening of `kinds` on top of `base` (see [`crate::diagnose::screen`]), in their
+/// order: `None` for a candidate whose signature could not be simulated, and for every one
+/// when the base model cannot be linearised (those are refitted unscreened).
+fn screen_stage(
+    kinds: &[EffectKind],
+    base: &Base<'_>,
+    sigmas: &[(usize, Channel, f64)],
+    localisation: &Localisation,
+    settings: &DiagnoseSettings,
+) -> Vec<Option<Screening>> {
+    let factor = settings.step_factor;
+    let projection =
+        output_error_sensitivity(base.train, &base.motor, &base.effects, sigmas, None, factor)
+            .ok()
+            .and_then(|lin| BaseProjection::new(&lin.residuals, &lin.jacobian, &lin.series));
+    let Some(projection) = projection else {
+        return vec![None; kinds.len()];
+    };
+    kinds
+        .iter()
+        .map(|&kind| {
+            let effect = candidate_start(kind, &base.motor, base.train, localisation);
+            let effects = base.effects.with(effect);
+            output_error_sensitivity(
+                base.train,
+                &base.motor,
+                &effects,
+                sigmas,
+                Some(kind),
+                factor,
+            )
+            .ok()
+            .map(|sig| projection.score(&sig.jacobian))
+        })
+        .collect()
+}
+
+/// One stage: every candidate screened, the best [`DiagnoseSettings::refits`] refitted on top
+/// of `base` (in parallel), then ranked.
 #[allow(clippy::too_many_arguments)]
 fn run_stage(
     stage_no: usize,
@@ -648,44 +771,88 @@ fn run_stage(
     let train_before = nrmse_summary(&base.fitted, train_mask);
     let heldout_before = nrmse_summary(&base.fitted, held_mask);
     let sse_before = block_sse(&base.fitted, sigmas, held, block);
-    // The report of a candidate whose refit failed.
-    let failed = |kind: EffectKind, effects: Effects, why: String| CandidateReport {
-        name: kind.name(),
-        testable: false,
-        significant: false,
-        p_value: 1.0,
-        heldout_p_value: 1.0,
-        params: Vec::new(),
-        train_nrmse_before: train_before,
-        train_nrmse_after: f64::NAN,
-        heldout_nrmse_before: heldout_before,
-        heldout_nrmse_after: f64::NAN,
-        motor_shift: Vec::new(),
-        motor: None,
-        effects,
-        failure: Some(why),
+    progress(DiagnoseProgress::Screening { stage: stage_no });
+    let screens = screen_stage(kinds, base, sigmas, localisation, settings);
+    // The level each candidate is judged at: α over every candidate the records can test
+    // (the screened-out ones included: the screening looked at the same data).
+    let family = screens
+        .iter()
+        .filter(|x| x.is_none_or(|s| s.testable))
+        .count()
+        .max(1);
+    let level = settings.verdict.alpha / family as f64;
+    // The candidates refitted: the best testable ones by their penalised score whose score
+    // passes the screening level, and any the screening could not score.
+    let penalty = settings.verdict.penalty_per_param;
+    let mut passed: Vec<usize> = (0..kinds.len())
+        .filter(|&k| screens[k].is_some_and(|s| s.testable && s.p_value < settings.screening_alpha))
+        .collect();
+    passed.sort_by(|a, b| {
+        let score = |k: usize| screens[k].map_or(f64::NEG_INFINITY, |s| s.penalised(penalty));
+        score(*b).total_cmp(&score(*a))
+    });
+    passed.truncate(settings.refits.max(1));
+    let mut refit_set: Vec<usize> = (0..kinds.len())
+        .filter(|&k| screens[k].is_none() || passed.contains(&k))
+        .collect();
+    refit_set.sort_unstable();
+    let screen_of = |k: usize| screens[k];
+    // The report of a candidate not refitted, or whose refit failed.
+    let unfitted =
+        |k: usize, effects: Effects, assessment: Assessment, why: Option<String>| CandidateReport {
+            name: kinds[k].name(),
+            assessment,
+            testable: assessment != Assessment::NotTestable,
+            significant: false,
+            screening: screen_of(k),
+            p_value: 1.0,
+            heldout_p_value: 1.0,
+            params: Vec::new(),
+            train_nrmse_before: train_before,
+            train_nrmse_after: f64::NAN,
+            heldout_nrmse_before: heldout_before,
+            heldout_nrmse_after: f64::NAN,
+            motor_shift: Vec::new(),
+            motor: None,
+            effects,
+            failure: why,
+        };
+    // Without the evidence of a refit, the screening score speaks: no evidence below the
+    // level, evidence the refit could not resolve above it.
+    let by_score = |k: usize, otherwise: Assessment| match screen_of(k) {
+        Some(s) if !s.testable => Assessment::NotTestable,
+        Some(s) if s.p_value >= level => Assessment::NoEvidence,
+        _ => otherwise,
     };
     let done = std::sync::atomic::AtomicUsize::new(0);
     progress(DiagnoseProgress::Candidates {
         stage: stage_no,
         done: 0,
-        total: kinds.len(),
+        total: refit_set.len(),
     });
-    let refit = |kind: EffectKind| -> (CandidateReport, Vec<f64>, Option<f64>) {
+    let refit = |k: usize| -> Refit {
+        let kind = kinds[k];
         let effect = candidate_start(kind, &base.motor, base.train, localisation);
         let effects = base.effects.with(effect);
-        let outcome =
-            identify_output_error_with_effects(base.train, &base.motor, &effects, settings.lm)
+        let outcome = fit_output_error(
+            base.train,
+            &[],
+            &[],
+            &base.motor,
+            &effects,
+            settings.lm,
+            settings.step_factor,
+        )
+        .map_err(|e| e.to_string())
+        .and_then(|fit| match fit.failure() {
+            Some(why) => Err(why),
+            None => Ok(fit),
+        })
+        .and_then(|fit| {
+            predict_with_step_factor(base.all, &fit.params, &fit.effects, settings.step_factor)
+                .map(|pred| (fit, pred))
                 .map_err(|e| e.to_string())
-                .and_then(|fit| match fit.failure() {
-                    Some(why) => Err(why),
-                    None => Ok(fit),
-                })
-                .and_then(|fit| {
-                    predict_output_error(base.all, &fit.params, &fit.effects)
-                        .map(|pred| (fit, pred))
-                        .map_err(|e| e.to_string())
-                });
+        });
         let report = match outcome {
             Ok((fit, pred)) => {
                 let own: Vec<EffectEstimate> = fit
@@ -707,13 +874,15 @@ fn run_stage(
                         relative: a / b - 1.0,
                     })
                     .collect();
+                // A refit that leaves the effect's parameters undetermined cannot name it:
+                // the screening score says whether that is for want of the effect.
+                let assessment = if determined(&own) {
+                    Assessment::NoEvidence
+                } else {
+                    by_score(k, Assessment::Unresolved)
+                };
                 (
                     CandidateReport {
-                        name: kind.name(),
-                        testable: determined(&own),
-                        significant: false,
-                        p_value: 1.0,
-                        heldout_p_value: 1.0,
                         params: own
                             .iter()
                             .map(|e| EffectParam {
@@ -724,35 +893,35 @@ fn run_stage(
                                 ci95: e.ci95,
                             })
                             .collect(),
-                        train_nrmse_before: train_before,
                         train_nrmse_after: nrmse_summary(&pred, train_mask),
-                        heldout_nrmse_before: heldout_before,
                         heldout_nrmse_after: nrmse_summary(&pred, held_mask),
                         motor_shift,
                         motor: Some(fit.params),
-                        effects: fit.effects,
-                        failure: None,
+                        ..unfitted(k, fit.effects, assessment, None)
                     },
-                    sse,
+                    if determined(&own) { sse } else { Vec::new() },
                     statistic,
                 )
             }
-            Err(why) => (failed(kind, effects, why), Vec::new(), None),
+            Err(why) => (
+                unfitted(k, effects, by_score(k, Assessment::Unresolved), Some(why)),
+                Vec::new(),
+                None,
+            ),
         };
         let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
         progress(DiagnoseProgress::Candidates {
             stage: stage_no,
             done: d,
-            total: kinds.len(),
+            total: refit_set.len(),
         });
         report
     };
-    // Candidates in parallel, at most `threads` at a time.
+    // The refits in parallel, at most `threads` at a time.
     let threads = settings.threads.max(1);
-    let mut results: Vec<(CandidateReport, Vec<f64>, Option<f64>)> =
-        Vec::with_capacity(kinds.len());
-    for chunk in kinds.chunks(threads) {
-        let part: Vec<(CandidateReport, Vec<f64>, Option<f64>)> = std::thread::scope(|scope| {
+    let mut refitted: Vec<(usize, Refit)> = Vec::with_capacity(refit_set.len());
+    for chunk in refit_set.chunks(threads) {
+        let part: Vec<(usize, Refit)> = std::thread::scope(|scope| {
             let handles: Vec<_> = chunk
                 .iter()
                 .map(|&k| scope.spawn(move || refit(k)))
@@ -761,24 +930,51 @@ fn run_stage(
                 .into_iter()
                 .zip(chunk)
                 .map(|(h, &k)| {
-                    h.join().unwrap_or_else(|_| {
+                    let result = h.join().unwrap_or_else(|_| {
                         (
-                            failed(k, base.effects, "the refit stopped unexpectedly".into()),
+                            unfitted(
+                                k,
+                                base.effects,
+                                by_score(k, Assessment::Unresolved),
+                                Some("the refit stopped unexpectedly".into()),
+                            ),
                             Vec::new(),
                             None,
                         )
-                    })
+                    });
+                    (k, result)
                 })
                 .collect()
         });
-        results.extend(part);
+        refitted.extend(part);
     }
+    // Every candidate in the order given: refitted, or reported with its screening score.
+    let results: Vec<Refit> = (0..kinds.len())
+        .map(|k| match refitted.iter().position(|(j, _)| *j == k) {
+            Some(at) => refitted.swap_remove(at).1,
+            None => (
+                unfitted(
+                    k,
+                    base.effects.with(candidate_start(
+                        kinds[k],
+                        &base.motor,
+                        base.train,
+                        localisation,
+                    )),
+                    by_score(k, Assessment::ScreenedOut),
+                    None,
+                ),
+                Vec::new(),
+                None,
+            ),
+        })
+        .collect();
     let scores: Vec<CandidateScore<'_>> = results
         .iter()
         .map(|(c, sse, statistic)| CandidateScore {
             name: c.name,
             extra_params: c.params.len(),
-            testable: c.testable && sse.len() == sse_before.len(),
+            testable: c.testable,
             train_statistic: *statistic,
             heldout_sse_before: &sse_before,
             heldout_sse_after: sse,
@@ -791,6 +987,9 @@ fn run_stage(
             c.significant = r.significant;
             c.p_value = r.p_value;
             c.heldout_p_value = r.heldout_p_value;
+            if r.significant {
+                c.assessment = Assessment::Significant;
+            }
         }
     }
     Stage {

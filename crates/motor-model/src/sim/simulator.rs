@@ -193,6 +193,25 @@ impl Simulator {
         Ok(self)
     }
 
+    /// The same simulator with its longest RK4 step `factor` times the default 1/40 of the
+    /// fastest time constant (`factor` in (0, 20]: at 20 a step is half a time constant, inside
+    /// RK4's stability bound; the global error grows as the step to the fourth power, about
+    /// 1e-6 of the response at 8). The steps an effect needs at speed
+    /// ([`Simulator::with_speed_bound`]) are not made longer. For fits that only need the
+    /// response to the noise level of a record.
+    pub fn with_step_factor(mut self, factor: f64) -> Result<Self, ModelError> {
+        let factor = positive("step factor", factor)?;
+        if factor > 20.0 {
+            return Err(ModelError::InvalidSetting {
+                name: "step factor".into(),
+                value: factor,
+                expected: "at most 20 (half the fastest time constant a step)",
+            });
+        }
+        self.max_step_s *= factor;
+        Ok(self)
+    }
+
     /// The same simulator with the steps an effect needs at speed (1/40 of a cogging period)
     /// taken at `|Ω| ≤ speed_rad_s` \[rad/s\] for the whole run rather than at the current
     /// speed: the step count on an interval then does not depend on the state, and the

@@ -1,0 +1,241 @@
+//! The withheld-effect benchmark (issue 9, point 5): the diagnosis run on cases of
+//! [`motor_model::withheld`] without being told their effect, and scored.
+//!
+//! Each case gives a high and a low step (the training records) and a reversal and a
+//! staircase (held out whole). The diagnosis starts from the equation-error estimate
+//! ([`crate::equation_error_start`]) on the training records and uses its default settings;
+//! samples on an ADC rail are left out ([`crate::find_clipping`]).
+//!
+//! Scores ([`Summary`]): the confusion matrix of the truth against the top-ranked verdict
+//! (cases with one effect or none), the top-1 accuracy (the first effect named is one present,
+//! or `none` for `none`; every case), false alarms on `none`, the share of two-effect cases
+//! with both named, and the median held-out NRMSE after/before of correctly named effects.
+
+use motor_model::withheld::{generate, CaseRecords, CaseSpec};
+use motor_model::{Input, Record, EFFECT_NAMES};
+use serde::Serialize;
+
+use crate::diagnose::run::{diagnose, DiagnoseSettings, Diagnosis};
+use crate::output_error::{equation_error_start, voltage_input, ExcitedRecord};
+
+/// One case diagnosed.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CaseOutcome {
+    /// The case's index.
+    pub index: usize,
+    /// The effects present (`["none"]` for none).
+    pub truth: Vec<&'static str>,
+    /// The effects named, in order (empty: `none`); or why the diagnosis failed.
+    pub named: Result<Vec<String>, String>,
+    /// Held-out NRMSE after/before of the first effect named, when it is one present.
+    pub heldout_ratio: Option<f64>,
+    /// Wall time of the diagnosis \[s\].
+    pub seconds: f64,
+}
+
+impl CaseOutcome {
+    /// The top-ranked verdict: the first effect named, `none`, or `failed`.
+    pub fn verdict(&self) -> &str {
+        match &self.named {
+            Ok(named) => named.first().map_or("none", String::as_str),
+            Err(_) => "failed",
+        }
+    }
+
+    /// Whether the top-ranked verdict is right (one of the effects present, or `none`).
+    pub fn top1_correct(&self) -> bool {
+        self.truth.contains(&self.verdict())
+    }
+}
+
+/// A record with its masks of clipped samples.
+struct Owned<'a> {
+    input: Input,
+    record: &'a Record,
+    clipped_current: Vec<bool>,
+    clipped_speed: Option<Vec<bool>>,
+}
+
+impl<'a> Owned<'a> {
+    fn new(record: &'a Record) -> Result<Self, String> {
+        let input = voltage_input(&record.t, &record.voltage).map_err(|e| e.to_string())?;
+        let clipped_current = crate::find_clipping(&record.current, None, 0.0);
+        let clipped_speed = match (&record.position, &record.speed) {
+            (None, Some(w)) => Some(crate::find_clipping(w, None, 0.0)),
+            _ => None,
+        };
+        Ok(Owned {
+            input,
+            record,
+            clipped_current,
+            clipped_speed,
+        })
+    }
+
+    fn excited(&self) -> ExcitedRecord<'_> {
+        let r = self.record;
+        let dt = if r.t.len() > 1 { r.t[1] - r.t[0] } else { 0.0 };
+        ExcitedRecord {
+            input: &self.input,
+            dt,
+            current: &r.current,
+            speed: if r.position.is_some() {
+                None
+            } else {
+                r.speed.as_deref()
+            },
+            position: r.position.as_deref(),
+            exclude_current: Some(&self.clipped_current),
+            exclude_speed: self.clipped_speed.as_deref(),
+        }
+    }
+}
+
+/// Diagnoses one case (module docs).
+pub fn run_case(case: &CaseSpec, settings: &DiagnoseSettings) -> CaseOutcome {
+    let t0 = std::time::Instant::now();
+    let truth = case.truth();
+    let named = diagnose_records(case, settings);
+    let (named, heldout_ratio) = match named {
+        Ok((named, ratio)) => {
+            let right = named.first().is_some_and(|n| truth.contains(&n.as_str()));
+            (Ok(named), ratio.filter(|_| right))
+        }
+        Err(e) => (Err(e), None),
+    };
+    CaseOutcome {
+        index: case.index,
+        truth,
+        named,
+        heldout_ratio,
+        seconds: t0.elapsed().as_secs_f64(),
+    }
+}
+
+/// The effects named for `case` and the held-out NRMSE after/before of the first.
+fn diagnose_records(
+    case: &CaseSpec,
+    settings: &DiagnoseSettings,
+) -> Result<(Vec<String>, Option<f64>), String> {
+    let d = diagnose_case(case, settings)?;
+    let named: Vec<String> = d.named().iter().map(|s| s.to_string()).collect();
+    let ratio = named.first().and_then(|name| {
+        d.stages
+            .first()?
+            .candidates
+            .iter()
+            .find(|c| c.name == name.as_str())
+            .map(|c| c.heldout_nrmse_after / c.heldout_nrmse_before)
+    });
+    Ok((named, ratio))
+}
+
+/// The diagnosis of `case`'s records (module docs), or why it could not be made.
+pub fn diagnose_case(case: &CaseSpec, settings: &DiagnoseSettings) -> Result<Diagnosis, String> {
+    let CaseRecords {
+        high,
+        low,
+        validation,
+    } = generate(case).map_err(|e| e.to_string())?;
+    let train: Vec<Owned<'_>> = [&high, &low]
+        .into_iter()
+        .map(Owned::new)
+        .collect::<Result<_, _>>()?;
+    let held: Vec<Owned<'_>> = validation
+        .iter()
+        .map(|(_, r)| Owned::new(r))
+        .collect::<Result<_, _>>()?;
+    let train_x: Vec<ExcitedRecord<'_>> = train.iter().map(Owned::excited).collect();
+    let held_x: Vec<ExcitedRecord<'_>> = held.iter().map(Owned::excited).collect();
+    let start = equation_error_start(&train_x).map_err(|e| e.to_string())?;
+    diagnose(&train_x, &held_x, &[], &start, settings, &|_| {}).map_err(|e| e.to_string())
+}
+
+/// The benchmark's scores (module docs).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Summary {
+    /// Row and column labels of [`Summary::confusion`]: `none`, the seven effects, then
+    /// `failed` (columns only).
+    pub labels: Vec<&'static str>,
+    /// `confusion[truth][verdict]`: counts over the cases with one effect or none.
+    pub confusion: Vec<Vec<usize>>,
+    /// Cases scored.
+    pub cases: usize,
+    /// Share of cases whose top-ranked verdict is right.
+    pub top1_accuracy: f64,
+    /// `none` cases with an effect named, and `none` cases.
+    pub false_alarms: (usize, usize),
+    /// Two-effect cases with both named, and two-effect cases.
+    pub both_named: (usize, usize),
+    /// Median held-out NRMSE after/before over correctly named effects (NaN if none).
+    pub median_heldout_ratio: f64,
+    /// Diagnoses that failed.
+    pub failed: usize,
+    /// Median wall time of a diagnosis \[s\].
+    pub median_seconds: f64,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.retain(|x| x.is_finite());
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+impl Summary {
+    /// The scores of `outcomes`.
+    pub fn of(outcomes: &[CaseOutcome]) -> Summary {
+        let mut labels: Vec<&'static str> = EFFECT_NAMES.to_vec();
+        if let Some(k) = labels.iter().position(|n| *n == "none") {
+            let none = labels.remove(k);
+            labels.insert(0, none);
+        }
+        let rows = labels.len();
+        labels.push("failed");
+        let mut confusion = vec![vec![0usize; labels.len()]; rows];
+        let (mut alarms, mut nones, mut both, mut pairs) = (0, 0, 0, 0);
+        for o in outcomes {
+            if o.truth.len() == 1 {
+                let row = labels.iter().position(|l| *l == o.truth[0]);
+                let col = labels.iter().position(|l| *l == o.verdict());
+                if let (Some(r), Some(c)) = (row, col) {
+                    confusion[r][c] += 1;
+                }
+            }
+            if o.truth == ["none"] {
+                nones += 1;
+                if o.named.as_ref().is_ok_and(|n| !n.is_empty()) {
+                    alarms += 1;
+                }
+            }
+            if o.truth.len() == 2 {
+                pairs += 1;
+                if o.named
+                    .as_ref()
+                    .is_ok_and(|n| o.truth.iter().all(|t| n.iter().any(|x| x == t)))
+                {
+                    both += 1;
+                }
+            }
+        }
+        let correct = outcomes.iter().filter(|o| o.top1_correct()).count();
+        Summary {
+            labels,
+            confusion,
+            cases: outcomes.len(),
+            top1_accuracy: correct as f64 / outcomes.len().max(1) as f64,
+            false_alarms: (alarms, nones),
+            both_named: (both, pairs),
+            median_heldout_ratio: median(outcomes.iter().filter_map(|o| o.heldout_ratio).collect()),
+            failed: outcomes.iter().filter(|o| o.named.is_err()).count(),
+            median_seconds: median(outcomes.iter().map(|o| o.seconds).collect()),
+        }
+    }
+}
