@@ -69,6 +69,13 @@ pub struct MechanicalFit {
     /// model gives it, both low-passed and decimated as in the fit (torque unit); samples at
     /// rest are left out.
     pub fitted: Vec<FittedTorque>,
+    /// `[J, f, Ts, offset]` corrected for the position's quantisation minus `values`: the
+    /// position step, differentiated once and twice behind the filters, is noise in the q̇ and
+    /// q̈ columns and biases the least-squares solution towards 0 (errors in the regressors).
+    /// The correction is the bias-compensated solution `(ΦᵀΦ − Σ) θ = Φᵀτ`, with `Σ` the
+    /// quantisation noise's covariance in the columns; the 95 % intervals are widened by it on
+    /// its side.
+    pub quantisation_bias: [f64; 4],
 }
 
 impl MechanicalFit {
@@ -146,6 +153,9 @@ pub fn identify_inverse_model(
 /// and torque, filtered and decimated, ends dropped, samples at rest left out.
 struct Rows {
     columns: [Vec<f64>; 3],
+    /// The position quantisation's share of the q̈ and q̇ columns: a uniform sequence of one
+    /// position step, filtered, differentiated and decimated like the position.
+    quantisation: [Vec<f64>; 2],
     torque: Vec<f64>,
     t_s: Vec<f64>,
 }
@@ -238,6 +248,10 @@ fn record_rows(
     let k = settings.decimation.max(1);
     let y = decimate(torque, k)?;
     let cols = [decimate(&qdd, k)?, decimate(&qd, k)?, decimate(&sign, k)?];
+    let noise_q = filter.filtfilt(&quantisation_probe(n, quantum));
+    let noise_qd = central(&noise_q, dt);
+    let noise_qdd = central(&noise_qd, dt);
+    let noise = [decimate(&noise_qdd, k)?, decimate(&noise_qd, k)?];
     // A decimated row is at rest if any sample behind it is (the decimation filter's span).
     let span = 2 * k + 1;
     let moving_run: Vec<bool> = (0..y.len())
@@ -253,6 +267,7 @@ fn record_rows(
     let keep: Vec<usize> = (edge..y.len() - edge).filter(|&r| moving_run[r]).collect();
     Ok(Rows {
         columns: cols.map(|c| keep.iter().map(|&r| c[r]).collect()),
+        quantisation: noise.map(|c| keep.iter().map(|&r| c[r]).collect()),
         torque: keep.iter().map(|&r| y[r]).collect(),
         t_s: keep.iter().map(|&r| (r * k) as f64 * dt).collect(),
     })
@@ -324,6 +339,18 @@ pub fn identify_inverse_model_pooled(
         .cholesky()
         .map(|c| c.solve(&jtb))
         .ok_or_else(|| bad("record", "the regressors are collinear: the motion does not excite J, f and Ts separately (use a richer trajectory)".into()))?;
+    // The quantisation noise's covariance in the q̈ and q̇ columns, summed over the rows.
+    let mut sigma = DMatrix::zeros(p, p);
+    for r in &rows {
+        for i in 0..r.torque.len() {
+            for j in 0..2 {
+                for l in 0..2 {
+                    sigma[(j, l)] += r.quantisation[j][i] * r.quantisation[l][i];
+                }
+            }
+        }
+    }
+    let compensated = (&jtj - &sigma).cholesky().map(|c| c.solve(&jtb));
     let model = &a * &theta;
     let mut fitted = Vec::with_capacity(rows.len());
     let mut at = 0;
@@ -368,12 +395,15 @@ pub fn identify_inverse_model_pooled(
     // A fixed offset is exactly 0, its interval [0, 0].
     let values: [f64; 4] = std::array::from_fn(|i| theta.get(i).copied().unwrap_or(0.0));
     let half = |u: &crate::stats::Uncertainty, i: usize| u.ci95_half_width.get(i).copied();
+    let quantisation_bias =
+        quantisation_bias(compensated.as_ref(), &values, unc.as_ref(), &settings)?;
     Ok(MechanicalFit {
         values,
         ci95: unc.as_ref().map(|u| {
             std::array::from_fn(|i| {
                 let h = half(u, i).unwrap_or(0.0);
-                [values[i] - h, values[i] + h]
+                let d = quantisation_bias[i];
+                [values[i] - h + d.min(0.0), values[i] + h + d.max(0.0)]
             })
         }),
         correlation: unc.map(|u| u.correlation),
@@ -386,7 +416,86 @@ pub fn identify_inverse_model_pooled(
         },
         offset_status,
         fitted,
+        quantisation_bias,
     })
+}
+
+/// Largest quantisation bias of J, f or Ts the fit accepts, as a fraction of the parameter's
+/// 95 % half-width: beyond it the first-order correction itself is no longer to be trusted.
+const MAX_QUANTISATION_BIAS: f64 = 1.0;
+
+/// The bias-compensated solution minus the least-squares one (see
+/// [`MechanicalFit::quantisation_bias`]), or the refusal when the position's resolution does not
+/// support the filter's cut-off: the bias of J, f or Ts exceeds its 95 % half-width, or the
+/// quantisation noise in the columns is as large as the columns themselves.
+fn quantisation_bias(
+    compensated: Option<&DVector<f64>>,
+    values: &[f64; 4],
+    unc: Option<&crate::stats::Uncertainty>,
+    settings: &InverseModelSettings,
+) -> Result<[f64; 4], FitError> {
+    let cutoff = settings.position_cutoff_hz;
+    let refuse = |detail: String, lower_to: Option<f64>| {
+        FitError::MethodDomain {
+        equation: "the inverse model (IDIM-LS)",
+        reason: format!(
+            "the position cut-off {cutoff} Hz is above what the position's resolution supports: {detail}; {}",
+            lower_to.map_or_else(
+                || "lower the cut-off or record the position with a finer encoder".to_string(),
+                |hz| format!("lower the cut-off to about {hz:.0} Hz or record the position with a finer encoder")
+            )
+        ),
+    }
+    };
+    let Some(compensated) = compensated else {
+        return Err(refuse(
+            "the position step, differentiated twice, is as large as the acceleration itself"
+                .into(),
+            None,
+        ));
+    };
+    let bias: [f64; 4] = std::array::from_fn(|i| compensated.get(i).map_or(0.0, |c| c - values[i]));
+    let Some(u) = unc else {
+        return Ok(bias);
+    };
+    let (worst, ratio) = (0..3)
+        .map(|i| {
+            let h = u.ci95_half_width.get(i).copied().unwrap_or(0.0);
+            (i, bias[i].abs() / h)
+        })
+        .fold(
+            (0, 0.0_f64),
+            |w, c| if c.1 > w.1 || c.1.is_nan() { c } else { w },
+        );
+    if ratio > MAX_QUANTISATION_BIAS || ratio.is_nan() {
+        // The q̈ noise power grows as the cut-off to the fifth power; aim at half the limit.
+        let lower_to = cutoff * (0.5 * MAX_QUANTISATION_BIAS / ratio).powf(0.2);
+        let name = MECHANICAL_NAMES[worst];
+        return Err(refuse(
+            format!(
+                "the position step, differentiated twice, biases {name} by {:.1} % ({:.1} times its 95 % half-width)",
+                100.0 * bias[worst] / values[worst].abs().max(f64::MIN_POSITIVE),
+                ratio
+            ),
+            lower_to.is_finite().then_some(lower_to),
+        ));
+    }
+    Ok(bias)
+}
+
+/// A uniform sequence on `[−step/2, step/2]` of `n` samples (a fixed xorshift sequence, the
+/// same every call): the quantisation error of a position recorded in steps of `step`.
+fn quantisation_probe(n: usize, step: f64) -> Vec<f64> {
+    let mut state: u64 = 0x9E37_79B9_7F4A_7C15;
+    (0..n)
+        .map(|_| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            let unit = (state >> 11) as f64 / (1_u64 << 53) as f64;
+            step * (unit - 0.5)
+        })
+        .collect()
 }
 
 /// Central differences on a uniform grid (one-sided at the ends).
