@@ -153,8 +153,9 @@ pub fn identify_inverse_model(
 /// and torque, filtered and decimated, ends dropped, samples at rest left out.
 struct Rows {
     columns: [Vec<f64>; 3],
-    /// The position quantisation's share of the q̈ and q̇ columns: a uniform sequence of one
-    /// position step, filtered, differentiated and decimated like the position.
+    /// The position quantisation's share of the q̈ and q̇ columns: the quantisation error of a
+    /// smoothed position ([`quantisation_probe`]), filtered, differentiated and decimated like
+    /// the position.
     quantisation: [Vec<f64>; 2],
     torque: Vec<f64>,
     t_s: Vec<f64>,
@@ -248,7 +249,19 @@ fn record_rows(
     let k = settings.decimation.max(1);
     let y = decimate(torque, k)?;
     let cols = [decimate(&qdd, k)?, decimate(&qd, k)?, decimate(&sign, k)?];
-    let noise_q = filter.filtfilt(&quantisation_probe(n, quantum));
+    // The true position is estimated at a quarter of the cut-off (still above the motion's
+    // bandwidth by the EMPS rule), so that the position steps themselves are smoothed out.
+    let smooth = Butterworth::low_pass(
+        settings.position_filter_order,
+        0.25 * settings.position_cutoff_hz,
+        1.0 / dt,
+    )?
+    .filtfilt(position);
+    let noise_q = filter.filtfilt(&quantisation_probe(
+        &smooth,
+        position[0],
+        position_step(position),
+    ));
     let noise_qd = central(&noise_q, dt);
     let noise_qdd = central(&noise_qd, dt);
     let noise = [decimate(&noise_qdd, k)?, decimate(&noise_qd, k)?];
@@ -483,18 +496,30 @@ fn quantisation_bias(
     Ok(bias)
 }
 
-/// A uniform sequence on `[−step/2, step/2]` of `n` samples (a fixed xorshift sequence, the
-/// same every call): the quantisation error of a position recorded in steps of `step`.
-fn quantisation_probe(n: usize, step: f64) -> Vec<f64> {
-    let mut state: u64 = 0x9E37_79B9_7F4A_7C15;
-    (0..n)
-        .map(|_| {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            let unit = (state >> 11) as f64 / (1_u64 << 53) as f64;
-            step * (unit - 0.5)
-        })
+/// The position's resolution: the smallest change between samples, or between successive
+/// changes (an axis that never moves slowly passes many steps per sample, but its changes
+/// still differ by one step); changes below 1e-9 of the largest |position| are rounding.
+fn position_step(position: &[f64]) -> f64 {
+    let scale = position.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    let floor = 1e-9 * scale;
+    let first: Vec<f64> = position.windows(2).map(|w| w[1] - w[0]).collect();
+    first
+        .iter()
+        .copied()
+        .chain(first.windows(2).map(|w| w[1] - w[0]))
+        .map(f64::abs)
+        .filter(|d| *d > floor)
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The quantisation error a position recorded in steps of `step` from `origin` would have if
+/// the axis followed `smooth` (the position low-passed, an estimate of the true one): the
+/// error keeps the record's own structure (a slow sawtooth at low speed, near-white noise when
+/// several steps pass per sample).
+fn quantisation_probe(smooth: &[f64], origin: f64, step: f64) -> Vec<f64> {
+    smooth
+        .iter()
+        .map(|x| origin + ((x - origin) / step).round() * step - x)
         .collect()
 }
 
