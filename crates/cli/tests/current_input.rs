@@ -3,7 +3,10 @@
 
 mod common;
 
-use common::{motorid, scratch, simulate_to, stderr, stdout, LOGGER};
+use common::{
+    assert_truth_in_intervals, motorid, scratch, simulate_to, stderr, stdout, LOGGER,
+    SMALL_SERVO_TRUTH,
+};
 
 fn report(records: &[&str]) -> serde_json::Value {
     let mut args = vec!["identify", "--input", "current"];
@@ -92,4 +95,58 @@ fn a_record_sampled_too_slowly_for_the_cutoff_is_named() {
         ],
         &format!("{slow}: --cutoff 100 Hz is not below half its sample rate (75"),
     );
+}
+
+/// The small servo (τe = 1 ms, τm = 50 ms) reversing at ±3 V, 0.5 s at 5 kHz through the
+/// logger (2000-count encoder): at a high position cut-off the encoder's step, differentiated
+/// twice, is noise in the q̈ column and biased J towards 0 (J 8.3e-6 [2.8e-6, 1.4e-5] at
+/// 500 Hz, exit 0, truth 2e-5). Each cut-off must give J, f, Ts inside their intervals, or be refused for
+/// the encoder's resolution (exit 3); the default-like 100 Hz must be accepted.
+#[test]
+fn a_cut_off_beyond_the_encoder_resolution_is_right_or_refused() {
+    let dir = scratch("current_input_quantised");
+    let rec = dir.join("servo.csv");
+    let mut args = vec![
+        "--motor",
+        "../../fixtures/motors/small_servo.json",
+        "--levels",
+        "0:3,0.25:-3",
+        "--duration",
+        "0.5",
+        "--rate",
+        "5000",
+        "--seed",
+        "7",
+        "--quiet",
+    ];
+    args.extend(LOGGER);
+    simulate_to(&rec, &args);
+    let rec = rec.to_str().unwrap();
+    let mechanical = &SMALL_SERVO_TRUTH[3..];
+    for cutoff in ["100", "200", "500", "1000"] {
+        let out = motorid(&[
+            "identify",
+            "--input",
+            "current",
+            "--record",
+            rec,
+            "--cutoff",
+            cutoff,
+            "--decimation",
+            "2",
+            "--json",
+        ]);
+        match out.status.code() {
+            Some(0) => {
+                let report: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
+                assert_truth_in_intervals(&report, mechanical);
+            }
+            Some(3) if cutoff != "100" => assert!(
+                stderr(&out).contains("above what the position's resolution supports"),
+                "--cutoff {cutoff}: {}",
+                stderr(&out)
+            ),
+            code => panic!("--cutoff {cutoff}: exit {code:?}: {}", stderr(&out)),
+        }
+    }
 }

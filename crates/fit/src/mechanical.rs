@@ -71,6 +71,14 @@ pub struct MechanicalFit {
     /// model gives it, both low-passed and decimated as in the fit (torque unit); samples at
     /// rest are left out.
     pub fitted: Vec<FittedTorque>,
+    /// The parameters corrected for the position's quantisation minus [`MechanicalFit::axis`]
+    /// (each in its unit, linear or rotary as `axis`): the
+    /// position step, differentiated once and twice behind the filters, is noise in the q̇ and
+    /// q̈ columns and biases the least-squares solution towards 0 (errors in the regressors).
+    /// The correction is the bias-compensated solution `(ΦᵀΦ − Σ) θ = Φᵀτ`, with `Σ` the
+    /// quantisation noise's covariance in the columns; the 95 % intervals are widened by it on
+    /// its side.
+    pub quantisation_bias: motor_model::AxisParams,
 }
 
 /// Units of J, f, Ts and the offset of a rotary axis (torque in N·m, angle in rad).
@@ -155,6 +163,10 @@ pub fn identify_inverse_model(
 /// and torque, filtered and decimated, ends dropped, samples at rest left out.
 struct Rows {
     columns: [Vec<f64>; 3],
+    /// The position quantisation's share of the q̈ and q̇ columns: the quantisation error of a
+    /// smoothed position ([`quantisation_probe`]), filtered, differentiated and decimated like
+    /// the position.
+    quantisation: [Vec<f64>; 2],
     torque: Vec<f64>,
     t_s: Vec<f64>,
 }
@@ -247,6 +259,22 @@ fn record_rows(
     let k = settings.decimation.max(1);
     let y = decimate(torque, k)?;
     let cols = [decimate(&qdd, k)?, decimate(&qd, k)?, decimate(&sign, k)?];
+    // The true position is estimated at a quarter of the cut-off (still above the motion's
+    // bandwidth by the EMPS rule), so that the position steps themselves are smoothed out.
+    let smooth = Butterworth::low_pass(
+        settings.position_filter_order,
+        0.25 * settings.position_cutoff_hz,
+        1.0 / dt,
+    )?
+    .filtfilt(position);
+    let noise_q = filter.filtfilt(&quantisation_probe(
+        &smooth,
+        position[0],
+        position_step(position),
+    ));
+    let noise_qd = central(&noise_q, dt);
+    let noise_qdd = central(&noise_qd, dt);
+    let noise = [decimate(&noise_qdd, k)?, decimate(&noise_qd, k)?];
     // A decimated row is at rest if any sample behind it is (the decimation filter's span).
     let span = 2 * k + 1;
     let moving_run: Vec<bool> = (0..y.len())
@@ -262,6 +290,7 @@ fn record_rows(
     let keep: Vec<usize> = (edge..y.len() - edge).filter(|&r| moving_run[r]).collect();
     Ok(Rows {
         columns: cols.map(|c| keep.iter().map(|&r| c[r]).collect()),
+        quantisation: noise.map(|c| keep.iter().map(|&r| c[r]).collect()),
         torque: keep.iter().map(|&r| y[r]).collect(),
         t_s: keep.iter().map(|&r| (r * k) as f64 * dt).collect(),
     })
@@ -333,6 +362,18 @@ pub fn identify_inverse_model_pooled(
         .cholesky()
         .map(|c| c.solve(&jtb))
         .ok_or_else(|| bad("record", "the regressors are collinear: the motion does not excite J, f and Ts separately (use a richer trajectory)".into()))?;
+    // The quantisation noise's covariance in the q̈ and q̇ columns, summed over the rows.
+    let mut sigma = DMatrix::zeros(p, p);
+    for r in &rows {
+        for i in 0..r.torque.len() {
+            for j in 0..2 {
+                for l in 0..2 {
+                    sigma[(j, l)] += r.quantisation[j][i] * r.quantisation[l][i];
+                }
+            }
+        }
+    }
+    let compensated = (&jtj - &sigma).cholesky().map(|c| c.solve(&jtb));
     let model = &a * &theta;
     let mut fitted = Vec::with_capacity(rows.len());
     let mut at = 0;
@@ -378,6 +419,8 @@ pub fn identify_inverse_model_pooled(
     let values: [f64; 4] = std::array::from_fn(|i| theta.get(i).copied().unwrap_or(0.0));
     let half = |u: &crate::stats::Uncertainty, i: usize| u.ci95_half_width.get(i).copied();
     let [mass_kg, viscous_ns_per_m, coulomb_n, offset_n] = values;
+    let quantisation_bias =
+        quantisation_bias(compensated.as_ref(), &values, unc.as_ref(), &settings)?;
     Ok(MechanicalFit {
         axis: motor_model::AxisParams {
             mass_kg,
@@ -388,7 +431,8 @@ pub fn identify_inverse_model_pooled(
         ci95: unc.as_ref().map(|u| {
             std::array::from_fn(|i| {
                 let h = half(u, i).unwrap_or(0.0);
-                [values[i] - h, values[i] + h]
+                let d = quantisation_bias[i];
+                [values[i] - h + d.min(0.0), values[i] + h + d.max(0.0)]
             })
         }),
         correlation: unc.map(|u| u.correlation),
@@ -401,7 +445,103 @@ pub fn identify_inverse_model_pooled(
         },
         offset_status,
         fitted,
+        quantisation_bias: motor_model::AxisParams {
+            mass_kg: quantisation_bias[0],
+            viscous_ns_per_m: quantisation_bias[1],
+            coulomb_n: quantisation_bias[2],
+            offset_n: quantisation_bias[3],
+        },
     })
+}
+
+/// Largest quantisation bias of J, f or Ts the fit accepts, as a fraction of the parameter's
+/// 95 % half-width: beyond it the first-order correction itself is no longer to be trusted.
+const MAX_QUANTISATION_BIAS: f64 = 1.0;
+
+/// The bias-compensated solution minus the least-squares one (see
+/// [`MechanicalFit::quantisation_bias`]), or the refusal when the position's resolution does not
+/// support the filter's cut-off: the bias of J, f or Ts exceeds its 95 % half-width, or the
+/// quantisation noise in the columns is as large as the columns themselves.
+fn quantisation_bias(
+    compensated: Option<&DVector<f64>>,
+    values: &[f64; 4],
+    unc: Option<&crate::stats::Uncertainty>,
+    settings: &InverseModelSettings,
+) -> Result<[f64; 4], FitError> {
+    let cutoff = settings.position_cutoff_hz;
+    let refuse = |detail: String, lower_to: Option<f64>| {
+        FitError::MethodDomain {
+        equation: "the inverse model (IDIM-LS)",
+        reason: format!(
+            "the position cut-off {cutoff} Hz is above what the position's resolution supports: {detail}; {}",
+            lower_to.map_or_else(
+                || "lower the cut-off or record the position with a finer encoder".to_string(),
+                |hz| format!("lower the cut-off to about {hz:.0} Hz or record the position with a finer encoder")
+            )
+        ),
+    }
+    };
+    let Some(compensated) = compensated else {
+        return Err(refuse(
+            "the position step, differentiated twice, is as large as the acceleration itself"
+                .into(),
+            None,
+        ));
+    };
+    let bias: [f64; 4] = std::array::from_fn(|i| compensated.get(i).map_or(0.0, |c| c - values[i]));
+    let Some(u) = unc else {
+        return Ok(bias);
+    };
+    let (worst, ratio) = (0..3)
+        .map(|i| {
+            let h = u.ci95_half_width.get(i).copied().unwrap_or(0.0);
+            (i, bias[i].abs() / h)
+        })
+        .fold(
+            (0, 0.0_f64),
+            |w, c| if c.1 > w.1 || c.1.is_nan() { c } else { w },
+        );
+    if ratio > MAX_QUANTISATION_BIAS || ratio.is_nan() {
+        // The q̈ noise power grows as the cut-off to the fifth power; aim at half the limit.
+        let lower_to = cutoff * (0.5 * MAX_QUANTISATION_BIAS / ratio).powf(0.2);
+        let name = MECHANICAL_NAMES[worst];
+        return Err(refuse(
+            format!(
+                "the position step, differentiated twice, biases {name} by {:.1} % ({:.1} times its 95 % half-width)",
+                100.0 * bias[worst] / values[worst].abs().max(f64::MIN_POSITIVE),
+                ratio
+            ),
+            lower_to.is_finite().then_some(lower_to),
+        ));
+    }
+    Ok(bias)
+}
+
+/// The position's resolution: the smallest change between samples, or between successive
+/// changes (an axis that never moves slowly passes many steps per sample, but its changes
+/// still differ by one step); changes below 1e-9 of the largest |position| are rounding.
+fn position_step(position: &[f64]) -> f64 {
+    let scale = position.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    let floor = 1e-9 * scale;
+    let first: Vec<f64> = position.windows(2).map(|w| w[1] - w[0]).collect();
+    first
+        .iter()
+        .copied()
+        .chain(first.windows(2).map(|w| w[1] - w[0]))
+        .map(f64::abs)
+        .filter(|d| *d > floor)
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The quantisation error a position recorded in steps of `step` from `origin` would have if
+/// the axis followed `smooth` (the position low-passed, an estimate of the true one): the
+/// error keeps the record's own structure (a slow sawtooth at low speed, near-white noise when
+/// several steps pass per sample).
+fn quantisation_probe(smooth: &[f64], origin: f64, step: f64) -> Vec<f64> {
+    smooth
+        .iter()
+        .map(|x| origin + ((x - origin) / step).round() * step - x)
+        .collect()
 }
 
 /// Central differences on a uniform grid (one-sided at the ends).

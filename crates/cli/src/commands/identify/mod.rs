@@ -407,8 +407,14 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
         decimation: a.decimation,
         fit_offset: true,
     };
-    let fit = identify_inverse_model_pooled(&axis_records, settings)
-        .map_err(|e| BadInput(format!("{shown}: {e}")))?;
+    // A fit the data cannot support at these settings is refused (exit 3); unusable records
+    // are bad input (exit 2).
+    let fit = identify_inverse_model_pooled(&axis_records, settings).map_err(|e| match e {
+        fit::FitError::MethodDomain { .. } => {
+            anyhow::Error::new(NotConverged(format!("{shown}: {e}")))
+        }
+        e => BadInput(format!("{shown}: {e}")).into(),
+    })?;
     let offset_note = match fit.offset_status {
         OffsetStatus::Fitted => None,
         OffsetStatus::FixedOneDirection => Some(
@@ -496,6 +502,7 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
                 "samples_after_decimation": fit.samples,
                 "torque_residual_rms": fit.residual_rms,
                 "nrmse_fit_percent": fit.nrmse_fit_percent,
+                "quantisation_bias": MECHANICAL_NAMES.iter().zip({ let b = fit.quantisation_bias; [b.mass_kg, b.viscous_ns_per_m, b.coulomb_n, b.offset_n] }).map(|(n, b)| (n.to_string(), json!(b))).collect::<serde_json::Map<_, _>>(),
                 "correlation": fit.correlation.as_ref().map(|c| json!({
                     "order": &MECHANICAL_NAMES[..c.nrows().min(4)],
                     "matrix": (0..c.nrows()).map(|i| (0..c.ncols()).map(|j| c[(i, j)]).collect::<Vec<f64>>()).collect::<Vec<_>>(),
