@@ -183,8 +183,14 @@ pub(crate) fn assess_parts(
             let rel = e.ci95.map_or(f64::NAN, |c| 0.5 * (c[1] - c[0]) / e.value);
             (e.symbol, rel)
         });
-    motor
-        .chain(positive_effects)
+    // An interval of no width is not an interval: a degenerate covariance (every parameter
+    // at a point no residual moves from), not a measurement without error.
+    let widths: Vec<(&'static str, f64)> = motor.chain(positive_effects).collect();
+    if widths.iter().any(|&(_, rel)| rel == 0.0) {
+        return Some(Refusal::NoIntervals);
+    }
+    widths
+        .into_iter()
         .find(|&(_, rel)| rel.is_nan() || rel > 1.0)
         .map(|(parameter, rel)| Refusal::Undetermined {
             parameter,
@@ -275,6 +281,21 @@ mod tests {
                 &[quality(98.4)],
                 &facts()
             ),
+            None
+        );
+    }
+
+    /// Intervals of no width (a 21-sample step pair whose full fit ended with a degenerate
+    /// covariance, f = 7.7e-169) are no intervals; narrow ones are.
+    #[test]
+    fn intervals_of_no_width_are_refused() {
+        let q = [quality(98.4)];
+        assert_eq!(
+            assess_parts(&paper(), Some(&ci(&paper(), 0.0)), &[], &q, &facts()),
+            Some(Refusal::NoIntervals)
+        );
+        assert_eq!(
+            assess_parts(&paper(), Some(&ci(&paper(), 1e-9)), &[], &q, &facts()),
             None
         );
     }
