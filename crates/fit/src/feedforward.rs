@@ -516,6 +516,11 @@ struct FfRecord {
     free_start: Option<usize>,
     /// The levels of a piecewise-constant voltage with what is unknown of them, if given.
     levels: Vec<Level>,
+    /// Where the shift common to every level change's instant sits among the nuisances (in
+    /// units of a change's standard deviation), if any change has an uncertain instant: an
+    /// excitation clocked with the logger changes at the same point of every sample period
+    /// (a PRBS whose bits fall on samples), so the instants' errors are not independent.
+    common_start_slot: Option<usize>,
 }
 
 /// One level of a record's voltage as measured: its value and start with their standard
@@ -618,8 +623,13 @@ impl FfProblem {
             .levels
             .iter()
             .map(|l| {
+                let common = if l.start_slot.is_some() {
+                    shift(r.common_start_slot, l.start_sd)
+                } else {
+                    0.0
+                };
                 (
-                    l.start_s + shift(l.start_slot, l.start_sd),
+                    l.start_s + shift(l.start_slot, l.start_sd) + common,
                     l.volts + shift(l.volts_slot, l.volts_sd),
                 )
             })
@@ -856,6 +866,14 @@ pub fn identify_feedforward(
         }) {
             return Err(bad(label, "level variances must be finite and ≥ 0".into()));
         }
+        // Each instant's error is one common to the record plus one of its own, each with the
+        // variance of a change within its sample period: the prior holds for an excitation
+        // clocked with the logger (every change at the same point of its period) and for one
+        // that is not (each change anywhere in its period).
+        let common_start_slot = levels.iter().any(|l| l.start_slot.is_some()).then(|| {
+            nuisances += 1;
+            nuisances - 1
+        });
         prepared.push(FfRecord {
             input: rec.input.clone(),
             dt: rec.dt,
@@ -866,6 +884,7 @@ pub fn identify_feedforward(
             sigma,
             free_start,
             levels,
+            common_start_slot,
         });
         positions.push(position);
     }
