@@ -453,11 +453,19 @@ pub fn fit_excited_from(
 }
 
 /// kS, kV, kA (and τe where the records show it) of `loaded` from voltage and speed alone
-/// ([`fit::identify_feedforward`], its default settings); errors name `label`.
-pub fn fit_voltage_speed(loaded: &[LoadedExcited], label: &str) -> Result<FeedforwardFit> {
+/// ([`fit::identify_feedforward`]), with the back-EMF constant `torque_constant` \[N·m/A\]
+/// where it is given; errors name `label`.
+pub fn fit_voltage_speed(
+    loaded: &[LoadedExcited],
+    torque_constant: Option<f64>,
+    label: &str,
+) -> Result<FeedforwardFit> {
     let records: Vec<SpeedRecord> = loaded.iter().map(LoadedExcited::speed_record).collect();
-    identify_feedforward(&records, FeedforwardSettings::default())
-        .map_err(|e| BadInput(format!("{label}: {e}")).into())
+    let settings = FeedforwardSettings {
+        torque_constant,
+        ..FeedforwardSettings::default()
+    };
+    identify_feedforward(&records, settings).map_err(|e| BadInput(format!("{label}: {e}")).into())
 }
 
 /// The channels `rec` measured, for [`fit::RecordKind::decide`]: the current's range in ADC

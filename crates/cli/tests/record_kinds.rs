@@ -199,7 +199,6 @@ fn a_prbs_without_current_and_a_tachometer_gives_the_constants() {
 }
 
 #[test]
-#[ignore = "kS comes out about 30 % high (0.215 V [0.174, 0.257] against 0.16 V): the 2000-count encoder reads a speed of 0 while the rotor passes through zero at each reversal, and the fit takes that dwell for static friction"]
 fn a_prbs_without_current_and_an_encoder_gives_the_constants() {
     let dir = scratch("kinds_prbs_encoder");
     assert_voltage_speed_truth("PRBS, encoder", &[&prbs(&dir, false)]);
@@ -326,5 +325,229 @@ fn records_that_cannot_answer_are_refused_in_one_line() {
             "0.05",
         ],
         "--resistance 0",
+    );
+}
+
+/// One record of a fixture motor: `simulate`'s input options and where the record is cut
+/// (0: from its first sample).
+struct FixtureCase {
+    motor: &'static str,
+    what: &'static str,
+    input: &'static [&'static str],
+    cut_s: f64,
+}
+
+/// The other fixture motors (paper: τe 1 s, τm 8 s; critical: τe 0.17 s, τm 0.24 s;
+/// underdamped: τe 0.1 s above τm 0.04 s), each with a staircase, a PRBS and (but the
+/// underdamped motor: see the ignored test below) a step from one level to another cut where
+/// the motor runs steadily (ten mechanical time constants after it started: the critical
+/// motor's double pole still leaves 4 % of its rise after five), through the logger with an encoder and with a tachometer, fitted
+/// without and with R and k: every run is identified, and over all of them the 95 % intervals
+/// miss kS = R Ts/k, kV = (R f + k²)/k, kA = R J/k (and J, f, Ts) no more often than 95 %
+/// coverage allows: at most 14 of the 144 intervals (7.2 expected; more than 14 has a
+/// probability below 1 % at 95 % coverage).
+#[test]
+fn every_fixture_motor_without_current_gives_its_constants() {
+    const CASES: &[FixtureCase] = &[
+        FixtureCase {
+            motor: "paper",
+            what: "staircase",
+            input: &[
+                "--levels",
+                "1:10,15:30,30:15,45:40",
+                "--duration",
+                "60",
+                "--rate",
+                "100",
+            ],
+            cut_s: 0.0,
+        },
+        FixtureCase {
+            motor: "paper",
+            what: "PRBS",
+            input: &[
+                "--prbs",
+                "20,10,1",
+                "--step-at",
+                "1",
+                "--duration",
+                "100",
+                "--rate",
+                "100",
+            ],
+            cut_s: 0.0,
+        },
+        FixtureCase {
+            motor: "paper",
+            what: "10 V → 30 V running",
+            input: &[
+                "--levels",
+                "0:10,90:30",
+                "--duration",
+                "120",
+                "--rate",
+                "100",
+            ],
+            cut_s: 80.0,
+        },
+        FixtureCase {
+            motor: "critical",
+            what: "staircase",
+            input: &[
+                "--levels",
+                "0.1:12,1:30,2:15,3:40",
+                "--duration",
+                "4",
+                "--rate",
+                "200",
+            ],
+            cut_s: 0.0,
+        },
+        FixtureCase {
+            motor: "critical",
+            what: "PRBS",
+            input: &[
+                "--prbs",
+                "30,0.5,1",
+                "--step-at",
+                "0.1",
+                "--duration",
+                "5",
+                "--rate",
+                "200",
+            ],
+            cut_s: 0.0,
+        },
+        FixtureCase {
+            motor: "critical",
+            what: "20 V → 40 V running",
+            input: &["--levels", "0:20,3:40", "--duration", "5", "--rate", "200"],
+            cut_s: 2.5,
+        },
+        FixtureCase {
+            motor: "underdamped",
+            what: "staircase",
+            input: &[
+                "--levels",
+                "0.05:3,0.5:8,1:4,1.5:12",
+                "--duration",
+                "2",
+                "--rate",
+                "1000",
+            ],
+            cut_s: 0.0,
+        },
+        FixtureCase {
+            motor: "underdamped",
+            what: "PRBS",
+            input: &[
+                "--prbs",
+                "2,0.3,1",
+                "--step-at",
+                "0.05",
+                "--duration",
+                "3",
+                "--rate",
+                "1000",
+            ],
+            cut_s: 0.0,
+        },
+    ];
+    let dir = scratch("kinds_fixtures");
+    let (mut intervals, mut misses) = (0usize, Vec::new());
+    for case in CASES {
+        let motor = format!("../../fixtures/motors/{}.json", case.motor);
+        let m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&motor).unwrap()).unwrap();
+        let p = |k: &str| m[k].as_f64().unwrap();
+        let (r, k, f, j, ts) = (p("R"), p("k"), p("f"), p("J"), p("Ts"));
+        let (r_text, k_text) = (r.to_string(), k.to_string());
+        let feedforward = [
+            ("kS", r * ts / k),
+            ("kV", (r * f + k * k) / k),
+            ("kA", r * j / k),
+        ];
+        let physical = [("J", j), ("f", f), ("Ts", ts)];
+        for tacho in [false, true] {
+            let sensor = if tacho { "tachometer" } else { "encoder" };
+            let full = dir.join(format!("{}_{}_{tacho}_full.csv", case.motor, intervals));
+            let mut args = vec!["--motor", motor.as_str(), "--quiet"];
+            args.extend(case.input);
+            args.extend(logger(tacho));
+            simulate_to(&full, &args);
+            let path = dir.join(format!("{}_{}_{tacho}.csv", case.motor, intervals));
+            let drop: &[&str] = if tacho {
+                &["current", "position"]
+            } else {
+                &["current"]
+            };
+            without(&full, &path, drop, case.cut_s);
+            let plain = identify(&[&path], &[]);
+            let given = identify(
+                &[&path],
+                &["--resistance", &r_text, "--torque-constant", &k_text],
+            );
+            for (report, truth, how) in [
+                (&plain, feedforward.to_vec(), "without R, k"),
+                (
+                    &given,
+                    [&feedforward[..], &physical[..]].concat(),
+                    "with R, k",
+                ),
+            ] {
+                for (name, value) in truth {
+                    let (lo, hi) = interval(report, name);
+                    intervals += 1;
+                    let line = format!(
+                        "{} {}, {sensor}, {how}: {name} [{lo:.5e}, {hi:.5e}] truth {value:.5e}",
+                        case.motor, case.what
+                    );
+                    eprintln!("{line}");
+                    if !(lo <= value && value <= hi) {
+                        misses.push(line);
+                    }
+                }
+            }
+        }
+    }
+    assert_eq!(intervals, 144);
+    eprintln!("{} of {intervals} intervals miss", misses.len());
+    assert!(
+        misses.len() <= 14,
+        "{} misses:\n{}",
+        misses.len(),
+        misses.join("\n")
+    );
+}
+
+#[test]
+#[ignore = "refused (no intervals) at 4 V → 12 V, and kS 0.014 [0.012, 0.016] against 0.02 (kV missing too) at 1 V → 3 V: a step of the underdamped motor (τe above τm) from a steady level is not yet fitted right"]
+fn the_underdamped_motor_running_at_the_first_sample_gives_its_constants() {
+    let dir = scratch("kinds_underdamped_running");
+    let full = dir.join("full.csv");
+    let mut args = vec![
+        "--motor",
+        "../../fixtures/motors/underdamped.json",
+        "--levels",
+        "0:1,0.8:3",
+        "--duration",
+        "1.6",
+        "--rate",
+        "1000",
+        "--quiet",
+    ];
+    args.extend(logger(true));
+    simulate_to(&full, &args);
+    let path = dir.join("running.csv");
+    without(&full, &path, &["current", "position"], 0.6);
+    let report = identify(&[&path], &[]);
+    let (r, k, f, j, ts) = (1.0, 0.5, 0.01, 0.01, 0.01);
+    common::assert_truth_in_intervals(
+        &report,
+        &[
+            ("kS", r * ts / k),
+            ("kV", (r * f + k * k) / k),
+            ("kA", r * j / k),
+        ],
     );
 }

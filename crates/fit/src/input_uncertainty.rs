@@ -183,7 +183,7 @@ pub fn quantisation_bias_variance(sigma: f64, q: f64) -> f64 {
 }
 
 /// Standard normal distribution function.
-fn phi(x: f64) -> f64 {
+pub(crate) fn phi(x: f64) -> f64 {
     0.5 * libm::erfc(-x / std::f64::consts::SQRT_2)
 }
 

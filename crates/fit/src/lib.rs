@@ -70,7 +70,7 @@ pub use error::FitError;
 pub use feedforward::{
     identify_feedforward, simulate_feedforward, simulate_voltage_speed, FeedforwardFit,
     FeedforwardParams, FeedforwardSettings, MechanicalFromFeedforward, SpeedRecord, TauE,
-    VoltageSpeedModel, FEEDFORWARD_NAMES, FEEDFORWARD_UNITS,
+    VoltageSpeedModel, EXPLAINED_RATIO, FEEDFORWARD_NAMES, FEEDFORWARD_UNITS,
 };
 pub use full_model::{
     identify_full, identify_full_with_inputs, noise_std, Channel, ChannelQuality, FittedChannel,

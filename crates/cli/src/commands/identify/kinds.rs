@@ -237,5 +237,15 @@ pub fn report(
         )
         .into());
     }
+    if let Some((file, ratio)) = files
+        .iter()
+        .zip(&fit.residual_over_noise)
+        .find(|(_, &x)| x > fit::EXPLAINED_RATIO)
+    {
+        return Err(NotConverged(format!(
+            "the voltage-and-speed model does not explain {file}: its residual is {ratio:.1} times the record's noise (an electrical lag beyond what the fit tried, or an effect the model lacks: measure the current, or excite the motor more slowly)"
+        ))
+        .into());
+    }
     Ok(())
 }

@@ -722,10 +722,10 @@ fn run_output_error(
         .collect::<Vec<_>>()
         .join(" / ");
     if kind.is_voltage_speed() {
-        // k is not passed into the fit: there the viscous share of kV stays free (with its
-        // prior), and a given k enters only J, f, Ts. Fixing it narrowed kA's interval of an
-        // encoder staircase of the small servo to [8.02e-4, 8.16e-4] around a truth of 8.00e-4.
-        let fit = fit_voltage_speed(&loaded, &all)?;
+        // A given k fixes the back-EMF's share of kV, which τe couples to the speed: without
+        // it that share is a nuisance with a uniform prior, and kA's interval is 5–20 times
+        // wider.
+        let fit = fit_voltage_speed(&loaded, a.torque_constant, &all)?;
         return kinds::report(a, &kind, &fit, &files);
     }
     if a.resistance.is_some() || a.torque_constant.is_some() {
