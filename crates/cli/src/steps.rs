@@ -332,6 +332,27 @@ impl LoadedExcited {
     }
 }
 
+/// Reads a record of a current-driven axis (current and position; voltage optional) and checks
+/// that the position filter's `cutoff_hz` is below half its sample rate.
+pub fn load_axis_record(path: &Path, map: &ColumnMap, cutoff_hz: f64) -> Result<Record> {
+    let rec = crate::record_csv::read_mapped(path, map, false)?;
+    if rec.position.is_none() {
+        return Err(BadInput(format!("{}: no position column: --input current fits J, f, Ts from the position (map it with --columns position=HEADER)", path.display())).into());
+    }
+    // Each record's own rate: a pooled fit's refusal would not say which file.
+    let rate_hz = 1.0 / motor_model::mean_period(&rec.t);
+    if !(cutoff_hz > 0.0 && cutoff_hz < 0.5 * rate_hz) {
+        return Err(BadInput(format!(
+            "{}: --cutoff {} Hz is not below half its sample rate ({:.4} Hz): give a lower --cutoff, or records sampled faster",
+            path.display(),
+            cutoff_hz,
+            0.5 * rate_hz
+        ))
+        .into());
+    }
+    Ok(rec)
+}
+
 /// Reads a record of any voltage waveform for the output-error fit.
 pub fn load_excited(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedExcited> {
     excited_from(path, read_loaded(path, map, true)?, quiet)

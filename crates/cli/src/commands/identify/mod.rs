@@ -15,7 +15,7 @@ use serde_json::{json, Value};
 
 use crate::args::{AxisArg, DriveArg, IdentifyArgs};
 use crate::figures::FigureRecord;
-use crate::record_csv::{read_loaded, read_loaded_current_optional, read_mapped, ColumnMap};
+use crate::record_csv::{read_loaded, read_loaded_current_optional, ColumnMap};
 use crate::settings;
 use crate::steps::{
     common_channels, excited_from, file_lines, fit_excited_from, fit_voltage_speed, identify_pair,
@@ -327,24 +327,8 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
     let recs: Vec<motor_model::Record> = a
         .record
         .iter()
-        .map(|p| read_mapped(p, &map, false))
+        .map(|p| crate::steps::load_axis_record(p, &map, a.cutoff))
         .collect::<Result<_>>()?;
-    for (path, rec) in a.record.iter().zip(&recs) {
-        if rec.position.is_none() {
-            return Err(BadInput(format!("{}: no position column: --input current fits J, f, Ts from the position (map it with --columns position=HEADER)", path.display())).into());
-        }
-        // Each record's own rate: the pooled fit's refusal would not say which file.
-        let rate_hz = 1.0 / motor_model::mean_period(&rec.t);
-        if !(a.cutoff > 0.0 && a.cutoff < 0.5 * rate_hz) {
-            return Err(BadInput(format!(
-                "{}: --cutoff {} Hz is not below half its sample rate ({} Hz): give a lower --cutoff, or records sampled faster",
-                path.display(),
-                a.cutoff,
-                sig(0.5 * rate_hz)
-            ))
-            .into());
-        }
-    }
     let each: Vec<_> = recs.iter().map(|r| measured_channels(r, None)).collect();
     let kind = RecordKind::decide(
         common_channels(&each),
