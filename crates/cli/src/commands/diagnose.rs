@@ -360,6 +360,9 @@ fn print_report(d: &Report<'_>, seconds: f64) {
                 println!("Also present, on top of {name}: {extra}.");
             }
         }
+        _ if d.localisation.any_significant() => println!(
+            "Verdict: none — no candidate effect improves the held-out data significantly, yet the nominal model misses by more than the noise floor (where: below): the cause is outside the candidates, or a candidate fitted against its physics."
+        ),
         _ => println!(
             "Verdict: none — no candidate effect improves the held-out data significantly: the nominal model explains the records to within their noise."
         ),
@@ -413,6 +416,10 @@ fn print_report(d: &Report<'_>, seconds: f64) {
                 .map(|p| format!("{} {:.3e} {}", p.symbol, p.value, p.unit))
                 .collect::<Vec<_>>()
                 .join(", ");
+            let params = match &c.failure {
+                Some(why) => format!("{params} ({why})"),
+                None => params,
+            };
             println!(
                 "  {:<22} {:<20} {score:>9} {:>9.2e} {:>8.4} → {:<6.4} {:>8.4} → {:<6.4}  {params}",
                 c.name,

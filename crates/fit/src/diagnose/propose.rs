@@ -69,10 +69,12 @@ pub struct SeparatingTest {
     /// The two alternatives, the verdict's first.
     pub between: [String; 2],
     /// Step voltage from rest \[V\].
+    #[serde(rename = "voltage_V")]
     pub voltage_v: f64,
     /// Record length \[s\].
     pub duration_s: f64,
     /// Sample rate \[Hz\].
+    #[serde(rename = "rate_Hz")]
     pub rate_hz: f64,
     /// Largest difference of the two predictions over the noise floor, `max |d_i|`.
     pub max_difference_over_noise: f64,
@@ -86,6 +88,7 @@ pub struct SeparatingTest {
     /// records, for comparison \[noise variances\].
     pub separation_at_records: f64,
     /// That step's voltage \[V\].
+    #[serde(rename = "records_voltage_V")]
     pub records_voltage_v: f64,
     /// That step's length \[s\].
     pub records_length_s: f64,
