@@ -8,10 +8,11 @@ use anyhow::Result;
 use fit::{
     current_adc_steps, detect_initial_state, equation_error_start_with_initial_states,
     identify_feedforward, identify_output_error_with_initial_states, identify_step_pair,
-    judge_clipping, locate_step_with, record_speed, voltage_input, voltage_levels, ClippingVerdict,
-    CurrentChannel, DetectedInitialState, ExcitedRecord, FeedforwardFit, FeedforwardSettings,
-    FullFit, InitialState, LevelPrior, LmSettings, MeasuredChannels, RecordChannel, SpeedRecord,
-    StepInputs, StepMethod, StepPairIdentification, StepRecord, StepTest,
+    judge_clipping, locate_step_with, record_speed, voltage_input, voltage_levels, AxisRecord,
+    ClippingVerdict, CurrentChannel, DetectedInitialState, ExcitedRecord, FeedforwardFit,
+    FeedforwardSettings, FullFit, InitialState, LevelPrior, LmSettings, MeasuredChannels,
+    RecordChannel, SpeedRecord, StepInputs, StepMethod, StepPairIdentification, StepRecord,
+    StepTest,
 };
 use motor_model::{Effects, Input, MotorParams, Record};
 
@@ -351,6 +352,27 @@ pub fn load_axis_record(path: &Path, map: &ColumnMap, cutoff_hz: f64) -> Result<
         .into());
     }
     Ok(rec)
+}
+
+/// The torque (force) `k I` of each record of a current-driven axis, `k` per unit of the
+/// current column.
+pub fn axis_torques(recs: &[Record], k: f64) -> Vec<Vec<f64>> {
+    recs.iter()
+        .map(|r| r.current.iter().map(|i| k * i).collect())
+        .collect()
+}
+
+/// The inverse model's view of each record: its period, its torque (from [`axis_torques`])
+/// and its position.
+pub fn axis_records<'a>(recs: &'a [Record], torques: &'a [Vec<f64>]) -> Vec<AxisRecord<'a>> {
+    recs.iter()
+        .zip(torques)
+        .map(|(r, torque)| AxisRecord {
+            dt: motor_model::mean_period(&r.t),
+            torque,
+            position: r.position.as_deref().unwrap_or_default(),
+        })
+        .collect()
 }
 
 /// Reads a record of any voltage waveform for the output-error fit.

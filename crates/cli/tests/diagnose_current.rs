@@ -139,34 +139,15 @@ fn current_input_bad_input_is_refused_naming_the_file() {
     let rec = dir.join("axis.csv");
     std::fs::write(&rec, "t,current,position\n0,1,0\n0.001,1,0.1\n").unwrap();
     let rec = rec.to_str().unwrap();
+    let with = |extra: &[&'static str]| -> Vec<&str> {
+        let mut args = vec!["diagnose", "--input", "current", "--record", rec];
+        args.extend(extra);
+        args
+    };
+    assert_bad_input(&with(&[]), "needs --torque-constant");
     assert_bad_input(
-        &["diagnose", "--input", "current", "--record", rec],
-        "needs --torque-constant",
-    );
-    assert_bad_input(
-        &[
-            "diagnose",
-            "--input",
-            "current",
-            "--record",
-            rec,
-            "--torque-constant",
-            "1",
-            "--cutoff",
-            "900",
-        ],
+        &with(&["--torque-constant", "1", "--cutoff", "900"]),
         &format!("{rec}: --cutoff 900 Hz is not below half its sample rate"),
     );
-    assert_bad_input(
-        &[
-            "diagnose",
-            "--input",
-            "current",
-            "--record",
-            rec,
-            "--torque-constant",
-            "1",
-        ],
-        "at least",
-    );
+    assert_bad_input(&with(&["--torque-constant", "1"]), "at least");
 }

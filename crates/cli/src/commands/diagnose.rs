@@ -10,8 +10,7 @@ use fit::diagnose::{
     DiagnoseProgress, DiagnoseSettings, Diagnosis, InverseDiagnoseSettings, SeparatingTest, Stage,
 };
 use fit::{
-    equation_error_start, AxisRecord, ExcitedRecord, InverseModelSettings, StepMethod, PARAM_NAMES,
-    PARAM_UNITS,
+    equation_error_start, ExcitedRecord, InverseModelSettings, StepMethod, PARAM_NAMES, PARAM_UNITS,
 };
 use motor_model::EffectKind;
 use serde_json::json;
@@ -219,10 +218,7 @@ struct Report<'a> {
 impl Report<'_> {
     /// The effects named, in the order found.
     fn named(&self) -> Vec<&str> {
-        self.stages
-            .iter()
-            .filter_map(|s| s.verdict.verdict.as_deref())
-            .collect()
+        fit::diagnose::named_effects(self.stages)
     }
 }
 
@@ -490,19 +486,8 @@ fn run_current(a: &DiagnoseArgs) -> Result<()> {
         .iter()
         .map(|p| crate::steps::load_axis_record(p, &columns, a.cutoff))
         .collect::<Result<_>>()?;
-    let torques: Vec<Vec<f64>> = recs
-        .iter()
-        .map(|r| r.current.iter().map(|i| k * i).collect())
-        .collect();
-    let axis: Vec<AxisRecord<'_>> = recs
-        .iter()
-        .zip(&torques)
-        .map(|(r, torque)| AxisRecord {
-            dt: motor_model::mean_period(&r.t),
-            torque,
-            position: r.position.as_deref().unwrap_or_default(),
-        })
-        .collect();
+    let torques = crate::steps::axis_torques(&recs, k);
+    let axis = crate::steps::axis_records(&recs, &torques);
     let (train, valid) = axis.split_at(a.records.len());
     let names: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
     let names: Vec<&str> = names.iter().map(String::as_str).collect();

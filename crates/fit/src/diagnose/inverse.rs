@@ -178,11 +178,16 @@ pub struct InverseDiagnosis {
 impl InverseDiagnosis {
     /// The effects named, in the order found (empty: `none`).
     pub fn named(&self) -> Vec<&str> {
-        self.stages
-            .iter()
-            .filter_map(|s| s.verdict.verdict.as_deref())
-            .collect()
+        named_effects(&self.stages)
     }
+}
+
+/// The effects `stages` name, in the order found (empty: `none`).
+pub fn named_effects(stages: &[Stage]) -> Vec<&str> {
+    stages
+        .iter()
+        .filter_map(|s| s.verdict.verdict.as_deref())
+        .collect()
 }
 
 /// The measured torque of one record and the models of the diagnosis, on its rows.
@@ -960,4 +965,72 @@ fn run_stage(
         },
         next,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use motor_model::NoiseRng;
+
+    /// A linear axis (M 2 kg, Fv 10 N·s/m, Fc 3 N, offset 0.5 N) on two sines, 20 s at 1 kHz,
+    /// its position in steps of 1 µm, its force with 0.5 N of white noise and a drag
+    /// `c q̇|q̇|` on top.
+    fn axis(c: f64, seed: u64) -> (Vec<f64>, Vec<f64>) {
+        let dt = 1e-3;
+        let mut rng = NoiseRng::new(seed);
+        let w = [std::f64::consts::TAU * 0.5, std::f64::consts::TAU * 1.3];
+        let amp = [0.1, 0.05];
+        let (mut force, mut position) = (Vec::new(), Vec::new());
+        for i in 0..20_000 {
+            let t = i as f64 * dt;
+            let q: f64 = (0..2).map(|j| amp[j] * (w[j] * t).sin()).sum();
+            let qd: f64 = (0..2).map(|j| amp[j] * w[j] * (w[j] * t).cos()).sum();
+            let qdd: f64 = (0..2)
+                .map(|j| -amp[j] * w[j] * w[j] * (w[j] * t).sin())
+                .sum();
+            force.push(
+                2.0 * qdd
+                    + 10.0 * qd
+                    + 3.0 * qd.signum()
+                    + 0.5
+                    + c * qd * qd.abs()
+                    + 0.5 * rng.normal(),
+            );
+            position.push((q / 1e-6).round() * 1e-6);
+        }
+        (force, position)
+    }
+
+    fn run(c: f64) -> InverseDiagnosis {
+        let (force, position) = axis(c, 5);
+        let rec = AxisRecord {
+            dt: 1e-3,
+            torque: &force,
+            position: &position,
+        };
+        let settings = InverseDiagnoseSettings {
+            geometry: AxisGeometry::Linear,
+            candidates: vec![EffectKind::QuadraticDrag, EffectKind::StribeckFriction],
+            max_effects: 1,
+            ..InverseDiagnoseSettings::default()
+        };
+        diagnose_inverse(&[rec], &[], &["axis"], &settings).expect("a diagnosis")
+    }
+
+    #[test]
+    fn a_withheld_drag_is_named_with_its_size_and_none_without_it() {
+        let d = run(20.0);
+        assert_eq!(d.named(), ["quadratic_drag"]);
+        let drag = d.stages[0]
+            .candidates
+            .iter()
+            .find(|c| c.name == "quadratic_drag")
+            .unwrap();
+        let [lo, hi] = drag.params[0].ci95.unwrap();
+        assert!(lo <= 20.0 && 20.0 <= hi, "c = {:?}", drag.params[0]);
+        assert!(drag.heldout_nrmse_after < drag.heldout_nrmse_before);
+        assert_eq!(d.traces[0].models.len(), 2);
+        let d = run(0.0);
+        assert!(d.named().is_empty(), "{:?}", d.stages[0].verdict);
+    }
 }

@@ -37,7 +37,8 @@ pub mod screen;
 pub mod verdict;
 
 pub use inverse::{
-    diagnose_inverse, AxisGeometry, InverseDiagnoseSettings, InverseDiagnosis, TorqueTrace,
+    diagnose_inverse, named_effects, AxisGeometry, InverseDiagnoseSettings, InverseDiagnosis,
+    TorqueTrace,
 };
 pub use propose::{separating_test, SeparatingTest};
 pub use run::{

@@ -6,9 +6,9 @@ mod kinds;
 use anyhow::Result;
 use fit::{
     fit_apparent_resistance, identify_inverse_model_pooled, parameter_estimates, record_speed,
-    steady_value, torque_constant, voltage_input, AxisRecord, ChannelQuality, Drive, ExcitedRecord,
-    FullFit, InverseModelSettings, KnownConstants, OffsetStatus, PaperIdentification, RecordKind,
-    RecordSet, TorqueConstantError, MECHANICAL_NAMES, PARAM_NAMES,
+    steady_value, torque_constant, voltage_input, ChannelQuality, Drive, ExcitedRecord, FullFit,
+    InverseModelSettings, KnownConstants, OffsetStatus, PaperIdentification, RecordKind, RecordSet,
+    TorqueConstantError, MECHANICAL_NAMES, PARAM_NAMES,
 };
 use motor_model::Derived;
 use serde_json::{json, Value};
@@ -372,19 +372,8 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
             _ => BadInput("--input current needs --torque-constant K (the torque or force per unit of the current column) or a voltage column to estimate it from".into()),
         })?;
     let k_source = k_source.text();
-    let torques: Vec<Vec<f64>> = recs
-        .iter()
-        .map(|r| r.current.iter().map(|i| k * i).collect())
-        .collect();
-    let axis_records: Vec<AxisRecord<'_>> = recs
-        .iter()
-        .zip(&torques)
-        .map(|(r, torque)| AxisRecord {
-            dt: motor_model::mean_period(&r.t),
-            torque,
-            position: r.position.as_deref().unwrap_or_default(),
-        })
-        .collect();
+    let torques = crate::steps::axis_torques(&recs, k);
+    let axis_records = crate::steps::axis_records(&recs, &torques);
     let settings = InverseModelSettings {
         position_cutoff_hz: a.cutoff,
         position_filter_order: 4,
