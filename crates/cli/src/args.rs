@@ -67,6 +67,27 @@ pub struct DiagnoseArgs {
     /// Header names of the record columns, as in `identify`.
     #[arg(long, value_name = "t=NAME,voltage=NAME,...")]
     pub columns: Option<String>,
+    /// What drives the axis: voltage steps (the motor's six parameters and effects), or a
+    /// drive with a current loop (--record files of current and position: the inverse model's
+    /// torque residual is diagnosed, as `identify --input current`).
+    #[arg(long, value_enum, default_value = "voltage")]
+    pub input: DriveArg,
+    /// With --input current: torque (force) per unit of the current column [N·m/A or N/A].
+    #[arg(long, value_name = "K")]
+    pub torque_constant: Option<f64>,
+    /// With --input current: cut-off of the zero-phase position filter [Hz].
+    #[arg(long, value_name = "HZ", default_value_t = 100.0)]
+    pub cutoff: f64,
+    /// With --input current: decimation factor of the parallel filtering.
+    #[arg(long, value_name = "N", default_value_t = 10)]
+    pub decimation: usize,
+    /// With --input current: rotary axis (rad) or linear axis (m).
+    #[arg(long, value_enum, default_value = "rotary")]
+    pub axis: AxisArg,
+    /// Write figures (SVG and PNG): the residual of each record and channel before and after
+    /// the chosen effect.
+    #[arg(long, value_name = "DIR")]
+    pub plot: Option<PathBuf>,
     /// Print one JSON object instead of the report.
     #[arg(long)]
     pub json: bool,

@@ -128,3 +128,110 @@ pub fn fit_figures(
     }
     Ok(written)
 }
+
+/// One residual of a diagnosis: a channel of a record before and after the chosen effect.
+pub struct ResidualFigure<'a> {
+    /// File it came from (names the figure).
+    pub path: &'a str,
+    /// The channel's name (names the figure: `current`, `speed`, `force`).
+    pub channel: &'a str,
+    /// The residual's axis label with unit.
+    pub y_label: &'a str,
+    /// Time of each sample \[s\].
+    pub t: Vec<f64>,
+    /// Measured − nominal model.
+    pub before: Vec<f64>,
+    /// Measured − the model with the effects named, if any is.
+    pub after: Option<Vec<f64>>,
+}
+
+/// Figures of a diagnosis: for each record and channel, the residual of the nominal model and,
+/// when an effect is named (`named`), the residual with it, into
+/// `dir/<file stem>_<channel>_residual.svg` and `.png`.
+pub fn residual_figures(
+    dir: &Path,
+    figures: &[ResidualFigure<'_>],
+    named: &str,
+    quiet: bool,
+) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir)
+        .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
+    let mut written = Vec::new();
+    let after_label = format!("with {named}");
+    for f in figures {
+        let mut series = vec![Series {
+            label: "nominal model",
+            values: &f.before,
+            color: OTHER,
+        }];
+        if let Some(after) = &f.after {
+            series.push(Series {
+                label: &after_label,
+                values: after,
+                color: MODEL,
+            });
+        }
+        let title = match f.after {
+            Some(_) => format!(
+                "{}: {} residual before and after {named}",
+                f.path, f.channel
+            ),
+            None => format!("{}: {} residual (no effect named)", f.path, f.channel),
+        };
+        let name = Path::new(f.path)
+            .file_stem()
+            .map_or_else(|| "record".into(), |s| s.to_string_lossy().into_owned());
+        let stem = dir.join(format!("{name}_{}_residual", f.channel.replace(' ', "_")));
+        let paths = plot::time_series(
+            &stem,
+            &title,
+            &f.t,
+            &[Panel {
+                y_label: f.y_label,
+                series,
+            }],
+        )?;
+        if !quiet {
+            for p in &paths {
+                eprintln!("wrote {}", p.display());
+            }
+        }
+        written.extend(paths);
+    }
+    Ok(written)
+}
+
+/// The residual figures of the channels `before` and `after` hold (the same records and
+/// channels; `after` may be absent), on the records' times.
+pub fn channel_residuals<'a>(
+    records: &[FigureRecord<'a>],
+    before: &[FittedChannel],
+    after: Option<&[FittedChannel]>,
+) -> Vec<ResidualFigure<'a>> {
+    before
+        .iter()
+        .filter_map(|b| {
+            let rec = records.get(b.record)?;
+            let t = b
+                .samples
+                .iter()
+                .map(|&i| rec.t.get(i).copied().unwrap_or(f64::NAN))
+                .collect();
+            let after = after.and_then(|all| {
+                all.iter()
+                    .find(|a| {
+                        a.record == b.record && a.channel == b.channel && a.samples == b.samples
+                    })
+                    .map(|a| plot::residual(&a.measured, &a.model))
+            });
+            Some(ResidualFigure {
+                path: rec.path,
+                channel: b.channel.name(),
+                y_label: labels(b.channel).1,
+                t,
+                before: plot::residual(&b.measured, &b.model),
+                after,
+            })
+        })
+        .collect()
+}

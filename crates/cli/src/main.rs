@@ -107,8 +107,11 @@ fn declared_outputs(command: &Command) -> Vec<output::Declared> {
                 }
             }
         }
-        Command::Model(_) | Command::Montecarlo(_) | Command::Emulate(_) | Command::Diagnose(_) => {
-        }
+        Command::Diagnose(a) => outputs.extend(a.plot.iter().map(|path| Dir {
+            flag: "--plot",
+            path: path.clone(),
+        })),
+        Command::Model(_) | Command::Montecarlo(_) | Command::Emulate(_) => {}
     }
     outputs
 }

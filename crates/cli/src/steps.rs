@@ -8,10 +8,11 @@ use anyhow::Result;
 use fit::{
     current_adc_steps, detect_initial_state, equation_error_start_with_initial_states,
     identify_feedforward, identify_output_error_with_initial_states, identify_step_pair,
-    judge_clipping, locate_step_with, record_speed, voltage_input, voltage_levels, ClippingVerdict,
-    CurrentChannel, DetectedInitialState, ExcitedRecord, FeedforwardFit, FeedforwardSettings,
-    FullFit, InitialState, LevelPrior, LmSettings, MeasuredChannels, RecordChannel, SpeedRecord,
-    StepInputs, StepMethod, StepPairIdentification, StepRecord, StepTest,
+    judge_clipping, locate_step_with, record_speed, voltage_input, voltage_levels, AxisRecord,
+    ClippingVerdict, CurrentChannel, DetectedInitialState, ExcitedRecord, FeedforwardFit,
+    FeedforwardSettings, FullFit, InitialState, LevelPrior, LmSettings, MeasuredChannels,
+    RecordChannel, SpeedRecord, StepInputs, StepMethod, StepPairIdentification, StepRecord,
+    StepTest,
 };
 use motor_model::{Effects, Input, MotorParams, Record};
 
@@ -330,6 +331,48 @@ impl LoadedExcited {
             priors: &self.priors,
         }
     }
+}
+
+/// Reads a record of a current-driven axis (current and position; voltage optional) and checks
+/// that the position filter's `cutoff_hz` is below half its sample rate.
+pub fn load_axis_record(path: &Path, map: &ColumnMap, cutoff_hz: f64) -> Result<Record> {
+    let rec = crate::record_csv::read_mapped(path, map, false)?;
+    if rec.position.is_none() {
+        return Err(BadInput(format!("{}: no position column: --input current fits J, f, Ts from the position (map it with --columns position=HEADER)", path.display())).into());
+    }
+    // Each record's own rate: a pooled fit's refusal would not say which file.
+    let rate_hz = 1.0 / motor_model::mean_period(&rec.t);
+    if !(cutoff_hz > 0.0 && cutoff_hz < 0.5 * rate_hz) {
+        return Err(BadInput(format!(
+            "{}: --cutoff {} Hz is not below half its sample rate ({:.4} Hz): give a lower --cutoff, or records sampled faster",
+            path.display(),
+            cutoff_hz,
+            0.5 * rate_hz
+        ))
+        .into());
+    }
+    Ok(rec)
+}
+
+/// The torque (force) `k I` of each record of a current-driven axis, `k` per unit of the
+/// current column.
+pub fn axis_torques(recs: &[Record], k: f64) -> Vec<Vec<f64>> {
+    recs.iter()
+        .map(|r| r.current.iter().map(|i| k * i).collect())
+        .collect()
+}
+
+/// The inverse model's view of each record: its period, its torque (from [`axis_torques`])
+/// and its position.
+pub fn axis_records<'a>(recs: &'a [Record], torques: &'a [Vec<f64>]) -> Vec<AxisRecord<'a>> {
+    recs.iter()
+        .zip(torques)
+        .map(|(r, torque)| AxisRecord {
+            dt: motor_model::mean_period(&r.t),
+            torque,
+            position: r.position.as_deref().unwrap_or_default(),
+        })
+        .collect()
 }
 
 /// Reads a record of any voltage waveform for the output-error fit.

@@ -312,6 +312,19 @@ fn demo_prints_tables_1_and_2_beside_the_paper() {
         assert!(text.contains(line), "missing `{line}` in\n{text}");
     }
     assert!(text.contains("0.3881 ≠ 0.3381"));
+    // It ends with a diagnosis that names the withheld brush drop, its truth in its interval.
+    let verdict = text
+        .lines()
+        .find(|l| l.contains("verdict: "))
+        .unwrap_or_else(|| panic!("no diagnosis in\n{text}"));
+    assert!(verdict.contains("verdict: brush_drop, Vb = "), "{verdict}");
+    let interval = verdict
+        .split('[')
+        .nth(1)
+        .and_then(|r| r.split(']').next())
+        .unwrap();
+    let bounds: Vec<f64> = interval.split(", ").map(|v| v.parse().unwrap()).collect();
+    assert!(bounds[0] <= 0.3 && 0.3 <= bounds[1], "{verdict}");
 }
 
 /// Acceptance 3 of the identification issue, small version (the full check is

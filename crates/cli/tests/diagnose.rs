@@ -86,3 +86,53 @@ fn bad_input_is_refused_naming_the_file() {
         "unknown effect `wind`",
     );
 }
+
+/// A withheld drag that a Stribeck friction explains as well on these two steps: the verdict is
+/// ambiguous, and the report proposes the step record that separates the two fitted
+/// alternatives (no higher than the records' 12 V), which separates them better than a step
+/// like the records' own.
+#[test]
+fn an_ambiguous_drag_or_stribeck_verdict_proposes_a_separating_test() {
+    let dir = scratch("diagnose_ambiguous");
+    let [high, low] = small_servo_steps(&dir, Some("quadratic_drag:c=2e-7"));
+    let args = [
+        "diagnose",
+        "--high",
+        &high,
+        "--low",
+        &low,
+        "--candidates",
+        "quadratic_drag,stribeck_friction",
+        "--max-effects",
+        "1",
+        "--quiet",
+    ];
+    let out = motorid(&[&args[..], &["--json"]].concat());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let report: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
+    let names = ["quadratic_drag", "stribeck_friction"];
+    let verdict = report["verdict"].as_str().unwrap();
+    assert!(names.contains(&verdict), "{report:#}");
+    let other = report["ambiguous_with"][0].as_str().unwrap_or("");
+    assert!(names.contains(&other) && other != verdict, "{report:#}");
+    let t = &report["separating_test"];
+    assert_eq!(t["between"][0], verdict);
+    assert_eq!(t["between"][1], other);
+    let volts = t["voltage_V"].as_f64().unwrap();
+    assert!(volts > 0.0 && volts <= 12.0 + 1e-9, "{t:#}");
+    assert!(t["duration_s"].as_f64().unwrap() > 0.0, "{t:#}");
+    assert!(
+        t["max_difference_over_noise"].as_f64().unwrap() > 0.0,
+        "{t:#}"
+    );
+    assert!(
+        t["separation"].as_f64().unwrap() > t["separation_at_records"].as_f64().unwrap(),
+        "{t:#}"
+    );
+    let text = motorid(&args);
+    assert!(
+        stdout(&text).contains("To separate them, record a"),
+        "{}",
+        stdout(&text)
+    );
+}

@@ -327,6 +327,15 @@ fn bad_output_paths_are_refused_before_any_work() {
             f,
         ],
         vec!["demo", "--out", f],
+        vec![
+            "diagnose",
+            "--high",
+            hv.to_str().unwrap(),
+            "--low",
+            lv.to_str().unwrap(),
+            "--plot",
+            f,
+        ],
     ] {
         let out = motorid(&args);
         let err = stderr(&out);

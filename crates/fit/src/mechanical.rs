@@ -139,7 +139,7 @@ pub enum OffsetStatus {
 }
 
 /// Fewest decimated rows in each direction of motion for the offset to be told from Ts.
-const MIN_ROWS_EACH_WAY: usize = 20;
+pub(crate) const MIN_ROWS_EACH_WAY: usize = 20;
 
 /// Identifies `[J, f, Ts, offset]` from the motor torque (or force) `torque` and the position
 /// `position`, sampled every `dt` \[s\] ([`identify_inverse_model_pooled`] of one record).
@@ -161,14 +161,19 @@ pub fn identify_inverse_model(
 
 /// The regressor rows of one record: its observation matrix columns (`q̈`, `q̇`, `sign q̇`)
 /// and torque, filtered and decimated, ends dropped, samples at rest left out.
-struct Rows {
-    columns: [Vec<f64>; 3],
+pub(crate) struct Rows {
+    /// `q̈`, `q̇` and `sign q̇` at each row (position unit per s², per s; sign).
+    pub(crate) columns: [Vec<f64>; 3],
+    /// The filtered position at each row (rad or m).
+    pub(crate) position: Vec<f64>,
     /// The position quantisation's share of the q̈ and q̇ columns: the quantisation error of a
     /// smoothed position ([`quantisation_probe`]), filtered, differentiated and decimated like
     /// the position.
-    quantisation: [Vec<f64>; 2],
-    torque: Vec<f64>,
-    t_s: Vec<f64>,
+    pub(crate) quantisation: [Vec<f64>; 2],
+    /// The torque (or force) at each row, low-passed and decimated like the columns.
+    pub(crate) torque: Vec<f64>,
+    /// Time of each row from the record's first sample \[s\].
+    pub(crate) t_s: Vec<f64>,
 }
 
 /// Filters, differentiates and decimates record `index` (0-based) into regressor rows.
@@ -259,6 +264,7 @@ fn record_rows(
     let k = settings.decimation.max(1);
     let y = decimate(torque, k)?;
     let cols = [decimate(&qdd, k)?, decimate(&qd, k)?, decimate(&sign, k)?];
+    let q_rows = decimate(&q, k)?;
     // The true position is estimated at a quarter of the cut-off (still above the motion's
     // bandwidth by the EMPS rule), so that the position steps themselves are smoothed out.
     let smooth = Butterworth::low_pass(
@@ -290,10 +296,23 @@ fn record_rows(
     let keep: Vec<usize> = (edge..y.len() - edge).filter(|&r| moving_run[r]).collect();
     Ok(Rows {
         columns: cols.map(|c| keep.iter().map(|&r| c[r]).collect()),
+        position: keep.iter().map(|&r| q_rows[r]).collect(),
         quantisation: noise.map(|c| keep.iter().map(|&r| c[r]).collect()),
         torque: keep.iter().map(|&r| y[r]).collect(),
         t_s: keep.iter().map(|&r| (r * k) as f64 * dt).collect(),
     })
+}
+
+/// The regressor rows of every record (see [`identify_inverse_model_pooled`]).
+pub(crate) fn regressor_rows(
+    records: &[AxisRecord<'_>],
+    settings: &InverseModelSettings,
+) -> Result<Vec<Rows>, FitError> {
+    records
+        .iter()
+        .enumerate()
+        .map(|(i, r)| record_rows(i, r, settings))
+        .collect()
 }
 
 /// Identifies `[J, f, Ts, offset]` from several records of one axis, pooled into one least
@@ -314,11 +333,7 @@ pub fn identify_inverse_model_pooled(
     if records.is_empty() {
         return Err(bad("records", "no record given".into()));
     }
-    let rows: Vec<Rows> = records
-        .iter()
-        .enumerate()
-        .map(|(i, r)| record_rows(i, r, &settings))
-        .collect::<Result<_, _>>()?;
+    let rows = regressor_rows(records, &settings)?;
     let m: usize = rows.iter().map(|r| r.torque.len()).sum();
     let (forward, backward) = rows
         .iter()

@@ -4,12 +4,19 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Result;
-use fit::diagnose::{diagnose, DiagnoseError, DiagnoseProgress, DiagnoseSettings, Diagnosis};
-use fit::{equation_error_start, ExcitedRecord, StepMethod, PARAM_NAMES, PARAM_UNITS};
+use fit::diagnose::localise::Localisation;
+use fit::diagnose::{
+    diagnose, diagnose_inverse, Assessment, AxisGeometry, CandidateReport, DiagnoseError,
+    DiagnoseProgress, DiagnoseSettings, Diagnosis, InverseDiagnoseSettings, SeparatingTest, Stage,
+};
+use fit::{
+    equation_error_start, ExcitedRecord, InverseModelSettings, StepMethod, PARAM_NAMES, PARAM_UNITS,
+};
 use motor_model::EffectKind;
 use serde_json::json;
 
-use crate::args::DiagnoseArgs;
+use crate::args::{AxisArg, DiagnoseArgs, DriveArg};
+use crate::figures::{FigureRecord, ResidualFigure};
 use crate::record_csv::ColumnMap;
 use crate::steps::{identify_pair, in_order, load_excited, load_step, LoadedExcited};
 use crate::{BadInput, NotConverged};
@@ -27,6 +34,25 @@ struct Settings {
     quiet: bool,
 }
 
+/// The `--candidates` list, parsed (default: every effect).
+fn candidates(a: &DiagnoseArgs) -> Result<Vec<EffectKind>> {
+    if a.candidates.is_empty() {
+        return Ok(EffectKind::ALL.to_vec());
+    }
+    a.candidates
+        .iter()
+        .map(|c| {
+            c.trim().parse::<EffectKind>().map_err(|_| {
+                BadInput(format!(
+                    "--candidates: unknown effect `{c}`; known: {}",
+                    EffectKind::ALL.map(EffectKind::name).join(", ")
+                ))
+                .into()
+            })
+        })
+        .collect()
+}
+
 fn settings(a: &DiagnoseArgs) -> Result<Settings> {
     let mut training: Vec<PathBuf> = a.high.iter().chain(&a.low).cloned().collect();
     training.extend(a.records.iter().cloned());
@@ -37,21 +63,7 @@ fn settings(a: &DiagnoseArgs) -> Result<Settings> {
         )
         .into());
     }
-    let candidates = if a.candidates.is_empty() {
-        EffectKind::ALL.to_vec()
-    } else {
-        a.candidates
-            .iter()
-            .map(|c| {
-                c.trim().parse::<EffectKind>().map_err(|_| {
-                    BadInput(format!(
-                        "--candidates: unknown effect `{c}`; known: {}",
-                        EffectKind::ALL.map(EffectKind::name).join(", ")
-                    ))
-                })
-            })
-            .collect::<Result<_, _>>()?
-    };
+    let candidates = candidates(a)?;
     if a.max_effects == 0 {
         return Err(BadInput("--max-effects 0: give 1 or more".into()).into());
     }
@@ -75,6 +87,9 @@ fn settings(a: &DiagnoseArgs) -> Result<Settings> {
 }
 
 pub fn run(a: &DiagnoseArgs) -> Result<()> {
+    if a.input == DriveArg::Current {
+        return run_current(a);
+    }
     let s = settings(a)?;
     let load = |paths: &[PathBuf]| -> Result<Vec<LoadedExcited>> {
         paths
@@ -142,16 +157,89 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
         Err(DiagnoseError::Fit(e)) => return Err(BadInput(format!("{label}: {e}")).into()),
         Err(e) => return Err(anyhow::anyhow!("{label}: {e}")),
     };
+    let separating = separating_test(&d, &train, &valid);
+    let report = Report {
+        input: "voltage",
+        stages: &d.stages,
+        localisation: &d.localisation,
+        heldout: &d.heldout,
+        nominal_note: d.nominal_note.as_deref(),
+        nominal: motor_json(&d),
+        separating,
+    };
     if s.json {
-        println!("{}", serde_json::to_string_pretty(&report_json(&d))?);
+        println!("{}", serde_json::to_string_pretty(&report_json(&report))?);
     } else {
-        print_report(&d, t0.elapsed().as_secs_f64());
+        print_report(&report, t0.elapsed().as_secs_f64());
+    }
+    if let Some(dir) = &a.plot {
+        let records: Vec<FigureRecord> = training
+            .iter()
+            .chain(&validation)
+            .map(|l| FigureRecord {
+                path: &l.path,
+                t: l.record.t.clone(),
+                voltage: None,
+            })
+            .collect();
+        let all: Vec<ExcitedRecord<'_>> = train.iter().chain(&valid).copied().collect();
+        let after = d
+            .final_model()
+            .map(|(motor, effects)| {
+                fit::predict_output_error(&all, &motor, &effects).map_err(|e| {
+                    anyhow::anyhow!("{label}: predicting the model with its effects: {e}")
+                })
+            })
+            .transpose()?;
+        let nominal =
+            fit::predict_output_error(&all, &d.nominal.params, &motor_model::Effects::none())
+                .map_err(|e| anyhow::anyhow!("{label}: predicting the nominal model: {e}"))?;
+        let named = d.named().join(" + ");
+        let figures = crate::figures::channel_residuals(&records, &nominal, after.as_deref());
+        crate::figures::residual_figures(dir, &figures, &named, s.quiet)?;
     }
     Ok(())
 }
 
+/// What the report shows, from the diagnosis of a voltage- or a current-driven axis.
+struct Report<'a> {
+    /// `"voltage"` or `"current"`.
+    input: &'static str,
+    stages: &'a [Stage],
+    localisation: &'a Localisation,
+    heldout: &'a str,
+    nominal_note: Option<&'a str>,
+    /// The nominal model's parameters with units and intervals.
+    nominal: serde_json::Value,
+    /// The record that would separate an ambiguous verdict, if one is.
+    separating: Option<SeparatingTest>,
+}
+
+impl Report<'_> {
+    /// The effects named, in the order found.
+    fn named(&self) -> Vec<&str> {
+        fit::diagnose::named_effects(self.stages)
+    }
+}
+
+/// Whether the candidate was refitted (its figures after are set).
+fn refitted(c: &CandidateReport) -> bool {
+    c.refitted() || c.train_nrmse_after.is_finite()
+}
+
+/// The nominal motor's parameters with units and intervals, for JSON.
+fn motor_json(d: &Diagnosis) -> serde_json::Value {
+    PARAM_NAMES
+        .iter()
+        .zip(PARAM_UNITS)
+        .zip(d.nominal.params.values())
+        .enumerate()
+        .map(|(i, ((n, u), v))| json!({"name": n, "unit": u, "value": v, "ci95": d.nominal.ci95.map(|c| c[i])}))
+        .collect()
+}
+
 /// The JSON object of the contract: verdict, ambiguous_with, where, effects.
-fn report_json(d: &Diagnosis) -> serde_json::Value {
+fn report_json(d: &Report<'_>) -> serde_json::Value {
     let first = d.stages.first();
     let effects: Vec<serde_json::Value> = first
         .map(|s| {
@@ -186,11 +274,11 @@ fn report_json(d: &Diagnosis) -> serde_json::Value {
         "verdict": named.first().copied().unwrap_or("none"),
         "ambiguous_with": first.map(|s| s.verdict.ambiguous_with.clone()).unwrap_or_default(),
         "named": named,
+        "input": d.input,
         "heldout": d.heldout,
         "nominal_note": d.nominal_note,
-        "nominal": PARAM_NAMES.iter().zip(PARAM_UNITS).zip(d.nominal.params.values()).enumerate().map(|(i, ((n, u), v))| json!({
-            "name": n, "unit": u, "value": v, "ci95": d.nominal.ci95.map(|c| c[i]),
-        })).collect::<Vec<_>>(),
+        "nominal": d.nominal,
+        "separating_test": d.separating,
         "where": d.localisation,
         "findings": d.localisation.significant_findings().iter().take(10).map(|f| f.text.clone()).collect::<Vec<_>>(),
         "effects": effects,
@@ -212,7 +300,7 @@ fn advice(name: &str) -> &'static str {
     }
 }
 
-fn print_report(d: &Diagnosis, seconds: f64) {
+fn print_report(d: &Report<'_>, seconds: f64) {
     let named = d.named();
     let first = d.stages.first();
     match (named.first(), first) {
@@ -256,20 +344,27 @@ fn print_report(d: &Diagnosis, seconds: f64) {
             }
             if !stage.verdict.ambiguous_with.is_empty() {
                 println!(
-                    "Ambiguous: {} explain(s) the held-out data as well as {name}; a record at another voltage or a reversal would separate them.",
+                    "Ambiguous: {} explain(s) the held-out data as well as {name}.",
                     stage.verdict.ambiguous_with.join(", ")
                 );
+                match &d.separating {
+                    Some(t) => println!("{}", t.text()),
+                    None => println!("A record at another voltage or a reversal would separate them."),
+                }
             }
             for extra in named.iter().skip(1) {
                 println!("Also present, on top of {name}: {extra}.");
             }
         }
+        _ if d.localisation.any_significant() => println!(
+            "Verdict: none — no candidate effect improves the held-out data significantly, yet the nominal model misses by more than the noise floor (where: below): the cause is outside the candidates, or a candidate fitted against its physics."
+        ),
         _ => println!(
             "Verdict: none — no candidate effect improves the held-out data significantly: the nominal model explains the records to within their noise."
         ),
     }
     println!("Held-out data: {}. {:.1} s.", d.heldout, seconds);
-    if let Some(note) = &d.nominal_note {
+    if let Some(note) = d.nominal_note {
         println!("The nominal model alone is not a result here: {note}.");
     }
     let findings = d.localisation.significant_findings();
@@ -297,17 +392,17 @@ fn print_report(d: &Diagnosis, seconds: f64) {
             let score = c
                 .screening
                 .map_or("-".to_string(), |s| format!("{:.3e}", s.statistic));
-            if !c.refitted() {
+            if !refitted(c) {
                 println!(
                     "  {:<22} {:<20} {score:>9} {:>9}  {}",
                     c.name,
                     c.assessment.words(),
                     "-",
-                    c.failure
-                        .as_ref()
-                        .map_or("not refitted".to_string(), |why| format!(
-                            "refit failed: {why}"
-                        ))
+                    match (&c.failure, c.assessment) {
+                        (Some(why), Assessment::NotTestable) => why.clone(),
+                        (Some(why), _) => format!("refit failed: {why}"),
+                        (None, _) => "not refitted".to_string(),
+                    }
                 );
                 continue;
             }
@@ -317,6 +412,10 @@ fn print_report(d: &Diagnosis, seconds: f64) {
                 .map(|p| format!("{} {:.3e} {}", p.symbol, p.value, p.unit))
                 .collect::<Vec<_>>()
                 .join(", ");
+            let params = match &c.failure {
+                Some(why) => format!("{params} ({why})"),
+                None => params,
+            };
             println!(
                 "  {:<22} {:<20} {score:>9} {:>9.2e} {:>8.4} → {:<6.4} {:>8.4} → {:<6.4}  {params}",
                 c.name,
@@ -329,4 +428,142 @@ fn print_report(d: &Diagnosis, seconds: f64) {
             );
         }
     }
+}
+
+/// The separating test of an ambiguous verdict, for records like `train` and `valid`: steps
+/// up to their largest voltage, durations around their length, at their sample rate.
+fn separating_test(
+    d: &Diagnosis,
+    train: &[ExcitedRecord<'_>],
+    valid: &[ExcitedRecord<'_>],
+) -> Option<SeparatingTest> {
+    let all: Vec<&ExcitedRecord<'_>> = train.iter().chain(valid).collect();
+    let peak = all
+        .iter()
+        .map(|r| r.input.peak_volts().abs())
+        .fold(0.0, f64::max);
+    let length = all
+        .iter()
+        .map(|r| r.dt * r.current.len().saturating_sub(1) as f64)
+        .fold(0.0, f64::max);
+    let rate = all.first().map(|r| 1.0 / r.dt)?;
+    fit::diagnose::separating_test(d, peak, length, rate)
+}
+
+/// `--input current`: the inverse model's torque residual of a current-driven axis,
+/// diagnosed (as `identify --input current` reads its records).
+fn run_current(a: &DiagnoseArgs) -> Result<()> {
+    if a.records.is_empty() || a.high.is_some() {
+        return Err(BadInput(
+            "diagnose --input current needs --record FILE.csv (current and position of the axis; repeatable), not --high/--low".into(),
+        )
+        .into());
+    }
+    let Some(k) = a.torque_constant else {
+        return Err(BadInput(
+            "diagnose --input current needs --torque-constant K (the torque or force per unit of the current column)".into(),
+        )
+        .into());
+    };
+    if !(k.is_finite() && k > 0.0) {
+        return Err(BadInput(format!("--torque-constant {k}: expected a positive number")).into());
+    }
+    if a.decimation == 0 {
+        return Err(
+            BadInput("--decimation 0: expected a factor of 1 (none) or more".into()).into(),
+        );
+    }
+    if a.max_effects == 0 {
+        return Err(BadInput("--max-effects 0: give 1 or more".into()).into());
+    }
+    let candidates = candidates(a)?;
+    let columns = match &a.columns {
+        Some(text) => ColumnMap::parse(text)?,
+        None => ColumnMap::default(),
+    };
+    let paths: Vec<&PathBuf> = a.records.iter().chain(&a.validate).collect();
+    let recs: Vec<motor_model::Record> = paths
+        .iter()
+        .map(|p| crate::steps::load_axis_record(p, &columns, a.cutoff))
+        .collect::<Result<_>>()?;
+    let torques = crate::steps::axis_torques(&recs, k);
+    let axis = crate::steps::axis_records(&recs, &torques);
+    let (train, valid) = axis.split_at(a.records.len());
+    let names: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
+    let names: Vec<&str> = names.iter().map(String::as_str).collect();
+    let label = names.join(", ");
+    let geometry = match a.axis {
+        AxisArg::Rotary => AxisGeometry::Rotary,
+        AxisArg::Linear => AxisGeometry::Linear,
+    };
+    let settings = InverseDiagnoseSettings {
+        inverse: InverseModelSettings {
+            position_cutoff_hz: a.cutoff,
+            decimation: a.decimation,
+            ..InverseModelSettings::default()
+        },
+        geometry,
+        torque_constant: k,
+        candidates,
+        max_effects: a.max_effects,
+        ..InverseDiagnoseSettings::default()
+    };
+    let t0 = Instant::now();
+    let d = match diagnose_inverse(train, valid, &names, &settings) {
+        Ok(d) => d,
+        Err(DiagnoseError::NominalFailed(why)) => {
+            return Err(NotConverged(format!(
+                "{label}: the inverse-model identification failed ({why}); no effect is named on top of a model that is not a result"
+            ))
+            .into())
+        }
+        Err(e) => return Err(BadInput(format!("{label}: {e}")).into()),
+    };
+    let nominal: serde_json::Value = d
+        .nominal
+        .estimates(geometry.units())
+        .iter()
+        .map(|e| json!({"name": e.name, "unit": e.unit, "value": e.value, "ci95": e.ci95}))
+        .collect();
+    let report = Report {
+        input: "current",
+        stages: &d.stages,
+        localisation: &d.localisation,
+        heldout: &d.heldout,
+        nominal_note: None,
+        nominal,
+        separating: None,
+    };
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report_json(&report))?);
+    } else {
+        println!(
+            "inverse model of the current-driven axis (torque = J q'' + f q' + Ts sign(q') + offset): its torque residual, localised in the unit of the current column (residual / {k})"
+        );
+        print_report(&report, t0.elapsed().as_secs_f64());
+    }
+    if let Some(dir) = &a.plot {
+        let (torque_label, residual_label) = match a.axis {
+            AxisArg::Rotary => ("torque", "torque residual [N·m]"),
+            AxisArg::Linear => ("force", "force residual [N]"),
+        };
+        let named = d.named().join(" + ");
+        let figures: Vec<ResidualFigure<'_>> = d
+            .traces
+            .iter()
+            .zip(&names)
+            .map(|(trace, name)| ResidualFigure {
+                path: name,
+                channel: torque_label,
+                y_label: residual_label,
+                t: trace.t_s.clone(),
+                before: crate::plot::residual(&trace.measured, &trace.models[0]),
+                after: (trace.models.len() > 1).then(|| {
+                    crate::plot::residual(&trace.measured, &trace.models[trace.models.len() - 1])
+                }),
+            })
+            .collect();
+        crate::figures::residual_figures(dir, &figures, &named, a.quiet)?;
+    }
+    Ok(())
 }

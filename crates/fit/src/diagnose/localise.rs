@@ -202,6 +202,9 @@ pub enum FloorSource {
     AdcStep,
     /// The encoder count of an encoder-derived speed.
     EncoderCount,
+    /// Given by the caller ([`localise_with_floors`]): e.g. the noise an inverse model's
+    /// regressors and torque carry through its filters.
+    Given,
 }
 
 /// The noise floor of one channel.
@@ -862,6 +865,19 @@ pub fn localise(
     records: &[ResidualRecord],
     settings: &LocaliseSettings,
 ) -> Result<Localisation, FitError> {
+    localise_with_floors(records, &[], settings)
+}
+
+/// [`localise`] with the noise floor of some channels given: `floors[k][j]`, when present and
+/// positive, is the floor deviation `σ` of channel `j` of record `k` (unit of the channel;
+/// white, `vᵢ = σ²`, `wᵢ = 2σ⁴`, [`FloorSource::Given`]), for a residual whose floor the
+/// measured signal cannot show (a filtered, decimated torque); the others are estimated as
+/// [`localise`] does.
+pub fn localise_with_floors(
+    records: &[ResidualRecord],
+    floors: &[Vec<f64>],
+    settings: &LocaliseSettings,
+) -> Result<Localisation, FitError> {
     check_settings(settings)?;
     for rec in records {
         check_record(rec)?;
@@ -871,13 +887,30 @@ pub fn localise(
     let mut planner = FftPlanner::new();
     let out = records
         .iter()
-        .map(|rec| {
+        .enumerate()
+        .map(|(k, rec)| {
             let n = rec.voltage.len();
             let phases = detect_phases(rec, n);
             let channels = rec
                 .channels
                 .iter()
-                .map(|ch| localise_channel(rec, ch, &phases, settings, family_alpha, &mut planner))
+                .enumerate()
+                .map(|(j, ch)| {
+                    let given = floors
+                        .get(k)
+                        .and_then(|f| f.get(j))
+                        .copied()
+                        .filter(|s| s.is_finite() && *s > 0.0);
+                    localise_channel(
+                        rec,
+                        ch,
+                        given,
+                        &phases,
+                        settings,
+                        family_alpha,
+                        &mut planner,
+                    )
+                })
                 .collect();
             RecordLocalisation {
                 name: rec.name.to_string(),
@@ -1038,6 +1071,32 @@ fn steady_scatter(y: &[f64]) -> Option<f64> {
         }
     }
     (blocks >= MIN_FLAT_BLOCKS).then(|| (rss_sum / dof as f64).sqrt())
+}
+
+/// A white floor of deviation `sigma` given by the caller.
+fn given_floor_model(ch: &ResidualChannel, sigma: f64, y_ss: f64) -> FloorModel {
+    let n = ch.measured.len();
+    let v = vec![sigma * sigma; n];
+    let report = NoiseFloor {
+        sigma,
+        source: FloorSource::Given,
+        steady_scatter: steady_scatter(ch.measured),
+        second_difference: noise_std(ch.measured),
+        adc_step: detect_quantum(ch.measured),
+        encoder_step_rad: None,
+        nrmse_floor: if y_ss > 0.0 {
+            sigma * (n as f64).sqrt() / y_ss.sqrt()
+        } else {
+            f64::INFINITY
+        },
+        rail_samples: 0,
+    };
+    FloorModel {
+        w: vec![2.0 * sigma.powi(4); n],
+        v,
+        keep: vec![true; n],
+        report,
+    }
 }
 
 fn floor_model(rec: &ResidualRecord, ch: &ResidualChannel, y_ss: f64) -> FloorModel {
@@ -1226,6 +1285,7 @@ fn excess_test((a, b, w): (f64, f64, f64), samples: usize, c: f64, alpha_test: f
 fn localise_channel(
     rec: &ResidualRecord,
     ch: &ResidualChannel,
+    given_floor: Option<f64>,
     phases: &[Phase],
     settings: &LocaliseSettings,
     family_alpha: f64,
@@ -1242,7 +1302,10 @@ fn localise_channel(
     } else {
         f64::INFINITY
     };
-    let floor = floor_model(rec, ch, y_ss);
+    let floor = match given_floor {
+        Some(sigma) => given_floor_model(ch, sigma, y_ss),
+        None => floor_model(rec, ch, y_ss),
+    };
     let full_residual = r;
     // The residual of the tests: zero at the samples left out.
     let r: Vec<f64> = full_residual

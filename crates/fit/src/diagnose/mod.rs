@@ -17,6 +17,10 @@
 //!   that are refitted in full.
 //! - [`benchmark`]: the diagnosis scored on cases whose effect it is not told
 //!   ([`motor_model::withheld`]).
+//! - [`inverse`]: the same for a current-driven axis, on the torque residual of the inverse
+//!   model (IDIM-LS), its candidates regressor columns refitted by least squares.
+//! - [`propose`]: for an ambiguous verdict, the step record (voltage, duration) whose
+//!   predictions by the two fitted alternatives differ most relative to the noise floor.
 //! - [`verdict`]: *which* — candidate effects ranked by their held-out improvement, each with a
 //!   paired test against the noise, `none` when nothing is significant, an ambiguous verdict
 //!   when the best two cannot be told apart.
@@ -25,11 +29,18 @@
 //! values (serialisable with `serde`).
 
 pub mod benchmark;
+pub mod inverse;
 pub mod localise;
+pub mod propose;
 pub mod run;
 pub mod screen;
 pub mod verdict;
 
+pub use inverse::{
+    diagnose_inverse, named_effects, AxisGeometry, InverseDiagnoseSettings, InverseDiagnosis,
+    TorqueTrace,
+};
+pub use propose::{separating_test, SeparatingTest};
 pub use run::{
     diagnose, Assessment, CandidateReport, DiagnoseError, DiagnoseProgress, DiagnoseSettings,
     Diagnosis, EffectParam, ParamShift, Stage,

@@ -257,6 +257,16 @@ impl Diagnosis {
             .filter_map(|s| s.verdict.verdict.as_deref())
             .collect()
     }
+
+    /// The motor and effects of the model with every named effect (the last stage's chosen
+    /// refit); `None` when nothing is named.
+    pub fn final_model(&self) -> Option<(MotorParams, Effects)> {
+        self.stages.iter().rev().find_map(|s| {
+            let name = s.verdict.verdict.as_deref()?;
+            let c = s.candidates.iter().find(|c| c.name == name)?;
+            c.motor.map(|m| (m, c.effects))
+        })
+    }
 }
 
 /// Why a diagnosis could not be made.

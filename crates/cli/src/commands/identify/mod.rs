@@ -6,16 +6,16 @@ mod kinds;
 use anyhow::Result;
 use fit::{
     fit_apparent_resistance, identify_inverse_model_pooled, parameter_estimates, record_speed,
-    steady_value, torque_constant, voltage_input, AxisRecord, ChannelQuality, Drive, ExcitedRecord,
-    FullFit, InverseModelSettings, KnownConstants, OffsetStatus, PaperIdentification, RecordKind,
-    RecordSet, TorqueConstantError, MECHANICAL_NAMES, PARAM_NAMES,
+    steady_value, torque_constant, voltage_input, ChannelQuality, Drive, ExcitedRecord, FullFit,
+    InverseModelSettings, KnownConstants, OffsetStatus, PaperIdentification, RecordKind, RecordSet,
+    TorqueConstantError, MECHANICAL_NAMES, PARAM_NAMES,
 };
 use motor_model::Derived;
 use serde_json::{json, Value};
 
 use crate::args::{AxisArg, DriveArg, IdentifyArgs};
 use crate::figures::FigureRecord;
-use crate::record_csv::{read_loaded, read_loaded_current_optional, read_mapped, ColumnMap};
+use crate::record_csv::{read_loaded, read_loaded_current_optional, ColumnMap};
 use crate::settings;
 use crate::steps::{
     common_channels, excited_from, file_lines, fit_excited_from, fit_voltage_speed, identify_pair,
@@ -327,24 +327,8 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
     let recs: Vec<motor_model::Record> = a
         .record
         .iter()
-        .map(|p| read_mapped(p, &map, false))
+        .map(|p| crate::steps::load_axis_record(p, &map, a.cutoff))
         .collect::<Result<_>>()?;
-    for (path, rec) in a.record.iter().zip(&recs) {
-        if rec.position.is_none() {
-            return Err(BadInput(format!("{}: no position column: --input current fits J, f, Ts from the position (map it with --columns position=HEADER)", path.display())).into());
-        }
-        // Each record's own rate: the pooled fit's refusal would not say which file.
-        let rate_hz = 1.0 / motor_model::mean_period(&rec.t);
-        if !(a.cutoff > 0.0 && a.cutoff < 0.5 * rate_hz) {
-            return Err(BadInput(format!(
-                "{}: --cutoff {} Hz is not below half its sample rate ({} Hz): give a lower --cutoff, or records sampled faster",
-                path.display(),
-                a.cutoff,
-                sig(0.5 * rate_hz)
-            ))
-            .into());
-        }
-    }
     let each: Vec<_> = recs.iter().map(|r| measured_channels(r, None)).collect();
     let kind = RecordKind::decide(
         common_channels(&each),
@@ -388,19 +372,8 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
             _ => BadInput("--input current needs --torque-constant K (the torque or force per unit of the current column) or a voltage column to estimate it from".into()),
         })?;
     let k_source = k_source.text();
-    let torques: Vec<Vec<f64>> = recs
-        .iter()
-        .map(|r| r.current.iter().map(|i| k * i).collect())
-        .collect();
-    let axis_records: Vec<AxisRecord<'_>> = recs
-        .iter()
-        .zip(&torques)
-        .map(|(r, torque)| AxisRecord {
-            dt: motor_model::mean_period(&r.t),
-            torque,
-            position: r.position.as_deref().unwrap_or_default(),
-        })
-        .collect();
+    let torques = crate::steps::axis_torques(&recs, k);
+    let axis_records = crate::steps::axis_records(&recs, &torques);
     let settings = InverseModelSettings {
         position_cutoff_hz: a.cutoff,
         position_filter_order: 4,
