@@ -117,7 +117,9 @@ fn main() -> ExitCode {
     quiet_broken_pipe();
     let cli = Cli::parse();
     let outcome = output::check(&declared_outputs(&cli.command)).and_then(|()| match cli.command {
-        Command::Model(a) => commands::model::run(&a),
+        Command::Model(a) => {
+            commands::model::Settings::from_args(&a).and_then(|s| commands::model::run(&s))
+        }
         Command::Simulate(a) => commands::simulate::run(&a),
         Command::Identify(a) => commands::identify::run(&a),
         Command::Demo(a) => commands::demo::run(&a),
