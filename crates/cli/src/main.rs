@@ -120,7 +120,9 @@ fn main() -> ExitCode {
         Command::Model(a) => {
             commands::model::Settings::from_args(&a).and_then(|s| commands::model::run(&s))
         }
-        Command::Simulate(a) => commands::simulate::run(&a),
+        Command::Simulate(a) => {
+            commands::simulate::Settings::from_args(&a).and_then(|s| commands::simulate::run(&s))
+        }
         Command::Identify(a) => commands::identify::run(&a),
         Command::Demo(a) => commands::demo::run(&a),
         Command::Montecarlo(a) => commands::montecarlo::run(&a),
