@@ -126,7 +126,9 @@ fn main() -> ExitCode {
         Command::Identify(a) => commands::identify::run(&a),
         Command::Demo(a) => commands::demo::run(&a),
         Command::Montecarlo(a) => commands::montecarlo::run(&a),
-        Command::Fleet(a) => commands::fleet::run(&a),
+        Command::Fleet(a) => {
+            commands::fleet::Settings::from_args(&a).and_then(|s| commands::fleet::run(&s))
+        }
         Command::Emulate(a) => commands::emulate::run(&a),
         Command::Acquire(a) => commands::acquire::run(&a),
         Command::Emps(a) => commands::emps::run(&a),
