@@ -129,7 +129,9 @@ fn main() -> ExitCode {
         Command::Fleet(a) => {
             commands::fleet::Settings::from_args(&a).and_then(|s| commands::fleet::run(&s))
         }
-        Command::Emulate(a) => commands::emulate::run(&a),
+        Command::Emulate(a) => {
+            commands::emulate::Settings::from_args(&a).and_then(|s| commands::emulate::run(&s))
+        }
         Command::Acquire(a) => commands::acquire::run(&a),
         Command::Emps(a) => commands::emps::run(&a),
         Command::Diagnose(a) => commands::diagnose::run(&a),
