@@ -132,7 +132,9 @@ fn main() -> ExitCode {
         Command::Emulate(a) => {
             commands::emulate::Settings::from_args(&a).and_then(|s| commands::emulate::run(&s))
         }
-        Command::Acquire(a) => commands::acquire::run(&a),
+        Command::Acquire(a) => {
+            commands::acquire::Settings::from_args(&a).and_then(|s| commands::acquire::run(&s))
+        }
         Command::Emps(a) => commands::emps::run(&a),
         Command::Diagnose(a) => commands::diagnose::run(&a),
     });
