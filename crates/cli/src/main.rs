@@ -135,7 +135,7 @@ fn main() -> ExitCode {
         Command::Acquire(a) => {
             commands::acquire::Settings::from_args(&a).and_then(|s| commands::acquire::run(&s))
         }
-        Command::Emps(a) => commands::emps::run(&a),
+        Command::Emps(a) => commands::emps::run(&commands::emps::Settings::from_args(&a)),
         Command::Diagnose(a) => commands::diagnose::run(&a),
     });
     match outcome {

@@ -34,7 +34,30 @@ fn column<'a>(table: &'a Table, name: &str, file: &str) -> Result<&'a [f64]> {
     })
 }
 
-pub fn run(a: &EmpsArgs) -> Result<()> {
+/// Where `motorid emps` reads the benchmark and what it writes, from its arguments.
+pub struct Settings {
+    /// Folder holding `DATA_EMPS.csv` and `DATA_EMPS_PULSES.csv`.
+    pub dir: std::path::PathBuf,
+    /// Folder for the figure, if one is asked for.
+    pub plot: Option<std::path::PathBuf>,
+    /// One JSON object instead of the report.
+    pub json: bool,
+}
+
+impl Settings {
+    /// The options of `a` (paths are checked when they are read).
+    pub fn from_args(a: &EmpsArgs) -> Settings {
+        Settings {
+            dir: a.dir.clone(),
+            plot: a.plot.clone(),
+            json: a.json,
+        }
+    }
+}
+
+/// Identifies the axis on the estimation record, simulates both records in closed loop and
+/// reports the gaps with and without the force pulses.
+pub fn run(a: &Settings) -> Result<()> {
     let est_path = a.dir.join("DATA_EMPS.csv");
     let val_path = a.dir.join("DATA_EMPS_PULSES.csv");
     let (est, val) = (read_table(&est_path)?, read_table(&val_path)?);
