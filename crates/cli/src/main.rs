@@ -124,7 +124,7 @@ fn main() -> ExitCode {
             commands::simulate::Settings::from_args(&a).and_then(|s| commands::simulate::run(&s))
         }
         Command::Identify(a) => commands::identify::run(&a),
-        Command::Demo(a) => commands::demo::run(&a),
+        Command::Demo(a) => commands::demo::run(&commands::demo::Settings::from_args(&a)),
         Command::Montecarlo(a) => commands::montecarlo::run(&a),
         Command::Fleet(a) => {
             commands::fleet::Settings::from_args(&a).and_then(|s| commands::fleet::run(&s))
