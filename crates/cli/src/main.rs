@@ -125,7 +125,8 @@ fn main() -> ExitCode {
         }
         Command::Identify(a) => commands::identify::run(&a),
         Command::Demo(a) => commands::demo::run(&commands::demo::Settings::from_args(&a)),
-        Command::Montecarlo(a) => commands::montecarlo::run(&a),
+        Command::Montecarlo(a) => commands::montecarlo::Settings::from_args(&a)
+            .and_then(|s| commands::montecarlo::run(&s)),
         Command::Fleet(a) => {
             commands::fleet::Settings::from_args(&a).and_then(|s| commands::fleet::run(&s))
         }
