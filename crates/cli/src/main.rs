@@ -123,7 +123,9 @@ fn main() -> ExitCode {
         Command::Simulate(a) => {
             commands::simulate::Settings::from_args(&a).and_then(|s| commands::simulate::run(&s))
         }
-        Command::Identify(a) => commands::identify::run(&a),
+        Command::Identify(a) => {
+            commands::identify::Settings::from_args(&a).and_then(|s| commands::identify::run(&s))
+        }
         Command::Demo(a) => commands::demo::run(&commands::demo::Settings::from_args(&a)),
         Command::Montecarlo(a) => commands::montecarlo::Settings::from_args(&a)
             .and_then(|s| commands::montecarlo::run(&s)),

@@ -16,11 +16,12 @@ use fit::{
 use motor_model::MotorParams;
 use serde_json::{json, Value};
 
-use crate::args::IdentifyArgs;
 use crate::output;
 use crate::record_csv::ColumnMap;
 use crate::steps::{fit_excited, identify_pair, in_order, load_excited, load_step, LoadedExcited};
 use crate::{parallel, settings, BadInput, NotConverged};
+
+use super::Settings;
 
 /// Outcome of one folder.
 enum Outcome {
@@ -214,7 +215,8 @@ fn summary_csv(rows: &[Row]) -> String {
     out
 }
 
-pub fn run(a: &IdentifyArgs, dir: &Path) -> Result<()> {
+/// Identifies every motor folder under `dir` in parallel and writes the summaries.
+pub fn run(a: &Settings, dir: &Path) -> Result<()> {
     let folders = motor_folders(dir)?;
     let n = folders.len();
     let threads = parallel::threads(n);
