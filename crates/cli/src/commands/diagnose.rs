@@ -15,7 +15,7 @@ use crate::steps::{identify_pair, in_order, load_excited, load_step, LoadedExcit
 use crate::{BadInput, NotConverged};
 
 /// The command's settings, validated from its arguments.
-struct Settings {
+pub struct Settings {
     /// The step pair, when given (`--high`, `--low`): the nominal fit starts from its
     /// identification.
     pair: Option<(PathBuf, PathBuf)>,
@@ -27,7 +27,9 @@ struct Settings {
     quiet: bool,
 }
 
-fn settings(a: &DiagnoseArgs) -> Result<Settings> {
+/// The options of `a`, each checked: records given, candidates known, `--max-effects` ≥ 1,
+/// `--columns`.
+pub fn settings(a: &DiagnoseArgs) -> Result<Settings> {
     let mut training: Vec<PathBuf> = a.high.iter().chain(&a.low).cloned().collect();
     training.extend(a.records.iter().cloned());
     if training.is_empty() {
@@ -74,8 +76,8 @@ fn settings(a: &DiagnoseArgs) -> Result<Settings> {
     })
 }
 
-pub fn run(a: &DiagnoseArgs) -> Result<()> {
-    let s = settings(a)?;
+/// Diagnoses the records and prints the verdict.
+pub fn run(s: &Settings) -> Result<()> {
     let load = |paths: &[PathBuf]| -> Result<Vec<LoadedExcited>> {
         paths
             .iter()
