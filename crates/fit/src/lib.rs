@@ -48,6 +48,7 @@ mod feedforward;
 mod full_model;
 mod initial_state;
 mod input_uncertainty;
+mod intervals;
 mod lm;
 mod mechanical;
 mod model33;
@@ -82,6 +83,7 @@ pub use initial_state::{
 pub use input_uncertainty::{
     estimate_level, quantisation_bias_variance, LevelEstimate, LevelPrior, StepInputs, VoltageScale,
 };
+pub use intervals::MotorIntervals;
 pub use lm::{
     solve, LeastSquares, LevenbergMarquardt, LmReport, LmSettings, NormalEquations, Termination,
 };

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 use fit::diagnose::{diagnose, DiagnoseError, DiagnoseProgress, DiagnoseSettings, Diagnosis};
-use fit::{equation_error_start, ExcitedRecord, StepMethod, PARAM_NAMES, PARAM_UNITS};
+use fit::{equation_error_start, parameter_estimates, ExcitedRecord, StepMethod};
 use motor_model::EffectKind;
 use serde_json::json;
 
@@ -190,8 +190,8 @@ fn report_json(d: &Diagnosis) -> serde_json::Value {
         "named": named,
         "heldout": d.heldout,
         "nominal_note": d.nominal_note,
-        "nominal": PARAM_NAMES.iter().zip(PARAM_UNITS).zip(d.nominal.params.values()).enumerate().map(|(i, ((n, u), v))| json!({
-            "name": n, "unit": u, "value": v, "ci95": d.nominal.ci95.map(|c| c[i]),
+        "nominal": parameter_estimates(&d.nominal.params, d.nominal.ci95.as_ref()).iter().map(|e| json!({
+            "name": e.name, "unit": e.unit, "value": e.value, "ci95": e.ci95,
         })).collect::<Vec<_>>(),
         "where": d.localisation,
         "findings": d.localisation.significant_findings().iter().take(10).map(|f| f.text.clone()).collect::<Vec<_>>(),
