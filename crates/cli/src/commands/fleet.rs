@@ -11,6 +11,7 @@ use motor_model::{Derived, Effects, Input, MotorParams, NoiseRng};
 
 use crate::args::FleetArgs;
 use crate::output;
+use crate::progress::Jobs;
 use crate::record_csv::write_file;
 use crate::settings::Logger;
 use crate::simulated::{measured_step, metadata};
@@ -92,7 +93,7 @@ pub fn run(a: &Settings) -> Result<()> {
         .map_err(|e| BadInput(format!("cannot create {}: {e}", a.out.display())))?;
     let mut rng = NoiseRng::new(a.seed);
     let width = a.motors.to_string().len().max(3);
-    let started = std::time::Instant::now();
+    let progress = Jobs::new(a.motors, "motors written", a.quiet);
     for m in 0..a.motors {
         let values = base
             .values()
@@ -134,15 +135,9 @@ pub fn run(a: &Settings) -> Result<()> {
             meta.push(("measurement".into(), serde_json::to_string(&measurement)?));
             write_file(&dir.join(name), &rec, &meta)?;
         }
-        if !a.quiet && ((m + 1) % (a.motors / 10).max(1) == 0 || m + 1 == a.motors) {
-            eprintln!(
-                "  {}/{} motors written ({:.1} s)",
-                m + 1,
-                a.motors,
-                started.elapsed().as_secs_f64()
-            );
-        }
+        progress.done(m + 1, String::new);
     }
+    drop(progress);
     println!("{} motors in {}", a.motors, a.out.display());
     Ok(())
 }

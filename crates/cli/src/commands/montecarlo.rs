@@ -12,6 +12,7 @@ use motor_model::{MotorParams, NoiseRng};
 use serde_json::json;
 
 use crate::args::MontecarloArgs;
+use crate::progress::Jobs;
 use crate::settings::{self, Logger};
 use crate::simulated::record_at;
 use crate::{BadInput, NotConverged};
@@ -170,7 +171,8 @@ impl Settings {
                     other => other,
                 },
                 subsample_step: a.subsample_step,
-                motor_spread: if a.motor_spread.is_finite() && (0.0..0.5).contains(&a.motor_spread) {
+                motor_spread: if a.motor_spread.is_finite() && (0.0..0.5).contains(&a.motor_spread)
+                {
                     a.motor_spread
                 } else {
                     return Err(BadInput(format!(
@@ -195,6 +197,7 @@ pub fn run(study: &Settings) -> Result<()> {
     let started = std::time::Instant::now();
     let identified = AtomicUsize::new(0);
     let failed = AtomicUsize::new(0);
+    let progress = Jobs::new(study.runs, "record pairs done", study.json);
     let results = crate::parallel::map(
         study.runs,
         |i| {
@@ -204,20 +207,16 @@ pub fn run(study: &Settings) -> Result<()> {
             result
         },
         |n| {
-            if !study.json && (n % (study.runs / 10).max(1) == 0 || n == study.runs) {
+            progress.done(n, || {
                 let (ok, bad) = (
                     identified.load(Ordering::Relaxed),
                     failed.load(Ordering::Relaxed),
                 );
-                eprintln!(
-                    "  {}/{} record pairs done: {ok} identified, {bad} failed ({:.1} s)",
-                    ok + bad,
-                    study.runs,
-                    started.elapsed().as_secs_f64()
-                );
-            }
+                format!(": {ok} identified, {bad} failed")
+            })
         },
     );
+    drop(progress);
     let mut runs = Vec::new();
     let mut failures = Vec::new();
     for r in results {
@@ -297,7 +296,11 @@ pub fn run(study: &Settings) -> Result<()> {
         );
     }
     if !failures.is_empty() {
-        println!("{} of {} runs failed; the first:", failures.len(), study.runs);
+        println!(
+            "{} of {} runs failed; the first:",
+            failures.len(),
+            study.runs
+        );
         for f in failures.iter().take(5) {
             println!("  {f}");
         }

@@ -17,6 +17,7 @@ use motor_model::MotorParams;
 use serde_json::{json, Value};
 
 use crate::output;
+use crate::progress::Jobs;
 use crate::record_csv::ColumnMap;
 use crate::steps::{fit_excited, identify_pair, in_order, load_excited, load_step, LoadedExcited};
 use crate::{parallel, settings, BadInput, NotConverged};
@@ -224,18 +225,13 @@ pub fn run(a: &Settings, dir: &Path) -> Result<()> {
     if !a.quiet {
         eprintln!("identifying {n} motors on {threads} threads…");
     }
+    let progress = Jobs::new(n, "motors", a.quiet);
     let rows = parallel::map(
         n,
         |i| identify_folder(&folders[i]),
-        |done| {
-            if !a.quiet && (done % (n / 10).max(1) == 0 || done == n) {
-                eprintln!(
-                    "  {done}/{n} motors ({:.1} s)",
-                    started.elapsed().as_secs_f64()
-                );
-            }
-        },
+        |done| progress.done(done, String::new),
     );
+    drop(progress);
     let elapsed = started.elapsed().as_secs_f64();
     let csv_path = dir.join("summary.csv");
     let json_path = dir.join("summary.json");
