@@ -121,9 +121,10 @@ impl Settings {
                 .into());
             }
             if a.decimation == 0 {
-                return Err(
-                    BadInput("--decimation 0: expected a factor of 1 (none) or more".into()).into(),
-                );
+                return Err(BadInput(
+                    "--decimation 0: expected a factor of 1 (none) or more".into(),
+                )
+                .into());
             }
         }
         let source = if drive == Drive::Current {
@@ -236,7 +237,7 @@ fn paper_json(paper: &PaperIdentification) -> Value {
         "eq48_Ts": paper.low.ts_nm,
         "eq50_KE": paper.low.k_e,
         "eq51_Ks": paper.low.k_s,
-        "steady_values": {"Irm": paper.steady_values[0], "Wrm": paper.steady_values[1], "Irb": paper.steady_values[2]},
+        "steady_values": {"Irm": paper.steady_values.i_rm_a, "Wrm": paper.steady_values.omega_rm_rad_s, "Irb": paper.steady_values.i_rb_a},
         "c8_speed_check": match &paper.speed_check {
             Ok(c) => json!({"wn": c.omega_n, "zeta": c.zeta, "rms": c.rms, "termination": c.termination.text(),
                             "wn_from_current": h.omega_n, "zeta_from_current": h.zeta}),
