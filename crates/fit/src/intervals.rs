@@ -25,14 +25,16 @@ impl MotorIntervals {
     /// an effect's or an initial state's, are not the motor's); `None` when fewer than six.
     pub(crate) fn from_solver_order(ci95: &[[f64; 2]]) -> Option<MotorIntervals> {
         match *ci95 {
-            [r_ohm, l_henry, k_nm_per_a, f_nms_per_rad, j_kgm2, ts_nm, ..] => Some(MotorIntervals {
-                r_ohm,
-                l_henry,
-                k_nm_per_a,
-                f_nms_per_rad,
-                j_kgm2,
-                ts_nm,
-            }),
+            [r_ohm, l_henry, k_nm_per_a, f_nms_per_rad, j_kgm2, ts_nm, ..] => {
+                Some(MotorIntervals {
+                    r_ohm,
+                    l_henry,
+                    k_nm_per_a,
+                    f_nms_per_rad,
+                    j_kgm2,
+                    ts_nm,
+                })
+            }
             _ => None,
         }
     }

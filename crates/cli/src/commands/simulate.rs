@@ -8,9 +8,9 @@ use anyhow::Result;
 use motor_model::{Effects, Input, MotorParams, Simulator, StepResponse, Trace};
 
 use crate::args::{SimulateArgs, SolverArg};
-use crate::settings::MeasurementOptions;
 use crate::record_csv;
 use crate::settings;
+use crate::settings::MeasurementOptions;
 use crate::BadInput;
 
 /// Time a run may take before it reports progress: shorter runs stay silent.
@@ -160,10 +160,7 @@ impl Settings {
                 SolverArg::Ode => Solver::Ode,
             }),
             measurement: MeasurementOptions::from_args(&a.measurement)?,
-            output: a
-                .output
-                .clone()
-                .filter(|path| path.as_os_str() != "-"),
+            output: a.output.clone().filter(|path| path.as_os_str() != "-"),
             quiet: a.quiet,
         })
     }

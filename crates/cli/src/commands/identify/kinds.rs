@@ -147,12 +147,7 @@ fn tau_e_json(tau_e: &TauE) -> Value {
 
 /// Prints the voltage-and-speed report (`--json` or the table) of `fit` on `files`, with
 /// `known` = (R, k) if given; exit 3 when the fit did not converge or gave no intervals.
-pub fn report(
-    a: &Settings,
-    kind: &RecordKind,
-    fit: &FeedforwardFit,
-    files: &[&str],
-) -> Result<()> {
+pub fn report(a: &Settings, kind: &RecordKind, fit: &FeedforwardFit, files: &[&str]) -> Result<()> {
     let known = a.resistance.zip(a.torque_constant);
     let estimates = fit.estimates(known);
     if a.json {
