@@ -49,7 +49,7 @@ impl Jobs {
         if !self.bar.is_hidden() {
             self.bar.set_message(detail());
             self.bar.set_position(done as u64);
-        } else if done % (self.total / 10).max(1) == 0 || done == self.total {
+        } else if done.is_multiple_of((self.total / 10).max(1)) || done == self.total {
             eprintln!(
                 "  {done}/{} {}{} ({:.1} s)",
                 self.total,
