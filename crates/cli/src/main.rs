@@ -14,6 +14,7 @@ mod output;
 mod paper_values;
 mod parallel;
 mod plot;
+mod progress;
 mod record_csv;
 mod settings;
 mod simulated;
@@ -119,18 +120,30 @@ fn declared_outputs(command: &Command) -> Vec<output::Declared> {
 fn main() -> ExitCode {
     quiet_broken_pipe();
     let cli = Cli::parse();
-    let outcome = output::check(&declared_outputs(&cli.command)).and_then(|()| match cli.command {
-        Command::Model(a) => commands::model::run(&a),
-        Command::Simulate(a) => commands::simulate::run(&a),
-        Command::Identify(a) => commands::identify::run(&a),
-        Command::Demo(a) => commands::demo::run(&a),
-        Command::Montecarlo(a) => commands::montecarlo::run(&a),
-        Command::Fleet(a) => commands::fleet::run(&a),
-        Command::Emulate(a) => commands::emulate::run(&a),
-        Command::Acquire(a) => commands::acquire::run(&a),
-        Command::Emps(a) => commands::emps::run(&a),
-        Command::Diagnose(a) => commands::diagnose::run(&a),
-    });
+    let outcome =
+        output::check(&declared_outputs(&cli.command)).and_then(|()| match cli.command {
+            Command::Model(a) => {
+                commands::model::Settings::from_args(&a).and_then(|s| commands::model::run(&s))
+            }
+            Command::Simulate(a) => commands::simulate::Settings::from_args(&a)
+                .and_then(|s| commands::simulate::run(&s)),
+            Command::Identify(a) => commands::identify::Settings::from_args(&a)
+                .and_then(|s| commands::identify::run(&s)),
+            Command::Demo(a) => commands::demo::run(&commands::demo::Settings::from_args(&a)),
+            Command::Montecarlo(a) => commands::montecarlo::Settings::from_args(&a)
+                .and_then(|s| commands::montecarlo::run(&s)),
+            Command::Fleet(a) => {
+                commands::fleet::Settings::from_args(&a).and_then(|s| commands::fleet::run(&s))
+            }
+            Command::Emulate(a) => {
+                commands::emulate::Settings::from_args(&a).and_then(|s| commands::emulate::run(&s))
+            }
+            Command::Acquire(a) => {
+                commands::acquire::Settings::from_args(&a).and_then(|s| commands::acquire::run(&s))
+            }
+            Command::Emps(a) => commands::emps::run(&commands::emps::Settings::from_args(&a)),
+            Command::Diagnose(a) => commands::diagnose::run(&a),
+        });
     match outcome {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {

@@ -1,52 +1,31 @@
-//! Work spread over all cores: one job per index, taken by whichever thread is free.
+//! Work spread over all cores by rayon's work-stealing pool.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
 
-/// `f(0), …, f(n − 1)` computed on all available cores (jobs of uneven length balance
-/// themselves: each thread takes the next index when it is free); `done(k)` is called after
-/// each job with the number finished so far. Results come back in index order.
+use rayon::prelude::*;
+
+/// `f(0), …, f(n − 1)` computed on rayon's pool (one thread per core; jobs of uneven length
+/// balance themselves by work stealing); `done(k)` is called after each job with the number
+/// finished so far. Results come back in index order.
 pub fn map<T: Send>(
     n: usize,
     f: impl Fn(usize) -> T + Sync,
     done: impl Fn(usize) + Sync,
 ) -> Vec<T> {
-    let threads = std::thread::available_parallelism()
-        .map_or(1, |c| c.get())
-        .min(n)
-        .max(1);
-    let next = AtomicUsize::new(0);
     let finished = AtomicUsize::new(0);
-    let results: Mutex<Vec<Option<T>>> = Mutex::new((0..n).map(|_| None).collect());
-    std::thread::scope(|scope| {
-        for _ in 0..threads {
-            scope.spawn(|| loop {
-                let i = next.fetch_add(1, Ordering::Relaxed);
-                if i >= n {
-                    break;
-                }
-                let value = f(i);
-                if let Ok(mut r) = results.lock() {
-                    r[i] = Some(value);
-                }
-                done(finished.fetch_add(1, Ordering::Relaxed) + 1);
-            });
-        }
-    });
-    results
-        .into_inner()
-        .unwrap_or_default()
-        .into_iter()
-        .flatten()
+    (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let value = f(i);
+            done(finished.fetch_add(1, Ordering::Relaxed) + 1);
+            value
+        })
         .collect()
 }
 
 /// Number of threads [`map`] uses for `n` jobs.
 pub fn threads(n: usize) -> usize {
-    std::thread::available_parallelism()
-        .map_or(1, |c| c.get())
-        .min(n)
-        .max(1)
+    rayon::current_num_threads().min(n).max(1)
 }
 
 #[cfg(test)]

@@ -407,50 +407,90 @@ fn range(option: &str, text: Option<&str>) -> Result<Option<Range>> {
     .transpose()
 }
 
-/// The measurement chain from its options, with ranges fixed for `trace` (a range not given
-/// covers the signal with 20 % headroom; noise given in LSBs is converted to SI per channel).
-pub fn measurement(a: &MeasurementArgs, trace: &Trace) -> Result<MeasurementModel> {
-    let adc = a
-        .adc_bits
-        .map(|bits| adc_bits("--adc-bits", bits))
-        .transpose()?;
-    if a.encoder_cpr == Some(0) {
-        return Err(
-            BadInput("--encoder-cpr 0: expected a positive count per revolution".into()).into(),
-        );
-    }
-    let given = [
-        range("--range-voltage", a.range_voltage.as_deref())?,
-        range("--range-current", a.range_current.as_deref())?,
-        range("--range-speed", a.range_speed.as_deref())?,
-    ];
-    let signals = [&trace.voltage, &trace.current, &trace.speed];
-    let ranges: [Range; 3] =
-        std::array::from_fn(|i| given[i].unwrap_or_else(|| Range::covering(signals[i])));
-    let noise_std = match (a.noise_lsb, adc) {
-        (None, _) => [0.0; 3],
-        (Some(lsb), _) if !(lsb.is_finite() && lsb >= 0.0) => {
-            return Err(BadInput(format!("--noise-lsb {lsb}: expected zero or more LSBs")).into())
-        }
-        (Some(_), None) => {
-            return Err(
-                BadInput("--noise-lsb needs --adc-bits (the LSB is the ADC's)".into()).into(),
+/// The measurement chain's options, checked: what `simulate` does to the trace once it is
+/// known ([`MeasurementOptions::model`] fixes the ranges not given from it).
+#[derive(Debug, Clone, Copy)]
+pub struct MeasurementOptions {
+    /// `--adc-bits`: the ADC of the analog channels, or exact values.
+    pub adc: Option<Adc>,
+    /// `--range-voltage` \[V\], `--range-current` \[A\], `--range-speed` \[rad/s\], where
+    /// given.
+    pub ranges: [Option<Range>; 3],
+    /// `--noise-lsb`: white noise on every analog channel \[LSB of the ADC\].
+    pub noise_lsb: Option<f64>,
+    /// `--encoder-cpr`: counts per revolution, or the exact angle.
+    pub encoder_cpr: Option<u32>,
+    /// `--speed-from`: the source of the speed column.
+    pub speed_source: SpeedSource,
+    /// `--seed` of the noise.
+    pub seed: u64,
+}
+
+impl MeasurementOptions {
+    /// The options of `a`, each checked: `--adc-bits` 1–24, `--encoder-cpr` > 0, ranges
+    /// `LO,HI` with `LO < HI`, `--noise-lsb` ≥ 0 and only with `--adc-bits`.
+    pub fn from_args(a: &MeasurementArgs) -> Result<MeasurementOptions> {
+        let adc = a
+            .adc_bits
+            .map(|bits| adc_bits("--adc-bits", bits))
+            .transpose()?;
+        if a.encoder_cpr == Some(0) {
+            return Err(BadInput(
+                "--encoder-cpr 0: expected a positive count per revolution".into(),
             )
+            .into());
         }
-        (Some(lsb), Some(adc)) => ranges.map(|r| lsb * adc.lsb(r)),
-    };
-    Ok(MeasurementModel {
-        adc,
-        ranges: ranges.map(Some),
-        noise_std,
-        encoder_counts_per_rev: a.encoder_cpr,
-        speed_source: match a.speed_from {
-            SpeedFromArg::Tacho => SpeedSource::Tacho,
-            SpeedFromArg::Encoder => SpeedSource::Encoder,
-            SpeedFromArg::None => SpeedSource::Omit,
-        },
-        seed: a.seed,
-    })
+        let ranges = [
+            range("--range-voltage", a.range_voltage.as_deref())?,
+            range("--range-current", a.range_current.as_deref())?,
+            range("--range-speed", a.range_speed.as_deref())?,
+        ];
+        match (a.noise_lsb, adc) {
+            (Some(lsb), _) if !(lsb.is_finite() && lsb >= 0.0) => {
+                return Err(
+                    BadInput(format!("--noise-lsb {lsb}: expected zero or more LSBs")).into(),
+                )
+            }
+            (Some(_), None) => {
+                return Err(
+                    BadInput("--noise-lsb needs --adc-bits (the LSB is the ADC's)".into()).into(),
+                )
+            }
+            _ => {}
+        }
+        Ok(MeasurementOptions {
+            adc,
+            ranges,
+            noise_lsb: a.noise_lsb,
+            encoder_cpr: a.encoder_cpr,
+            speed_source: match a.speed_from {
+                SpeedFromArg::Tacho => SpeedSource::Tacho,
+                SpeedFromArg::Encoder => SpeedSource::Encoder,
+                SpeedFromArg::None => SpeedSource::Omit,
+            },
+            seed: a.seed,
+        })
+    }
+
+    /// The measurement chain with ranges fixed for `trace` (a range not given covers the
+    /// signal with 20 % headroom; noise given in LSBs is converted to SI per channel).
+    pub fn model(&self, trace: &Trace) -> MeasurementModel {
+        let signals = [&trace.voltage, &trace.current, &trace.speed];
+        let ranges: [Range; 3] =
+            std::array::from_fn(|i| self.ranges[i].unwrap_or_else(|| Range::covering(signals[i])));
+        let noise_std = match (self.noise_lsb, self.adc) {
+            (Some(lsb), Some(adc)) => ranges.map(|r| lsb * adc.lsb(r)),
+            _ => [0.0; 3],
+        };
+        MeasurementModel {
+            adc: self.adc,
+            ranges: ranges.map(Some),
+            noise_std,
+            encoder_counts_per_rev: self.encoder_cpr,
+            speed_source: self.speed_source,
+            seed: self.seed,
+        }
+    }
 }
 
 /// The initial state `--initial-state` forces, `None` for `auto` (detected per record).

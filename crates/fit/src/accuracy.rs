@@ -5,6 +5,7 @@
 use motor_model::MotorParams;
 
 use crate::full_model::{PARAM_NAMES, PARAM_UNITS};
+use crate::intervals::MotorIntervals;
 
 /// One parameter of one identification against its truth.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -38,18 +39,20 @@ pub fn contains(interval: [f64; 2], value: f64) -> bool {
 /// the 95 % intervals `ci95` if there are any.
 pub fn accuracy(
     estimate: &MotorParams,
-    ci95: Option<&[[f64; 2]; 6]>,
+    ci95: Option<&MotorIntervals>,
     truth: &MotorParams,
 ) -> Vec<ParameterAccuracy> {
-    let (e, t) = (estimate.values(), truth.values());
-    (0..e.len())
-        .map(|k| ParameterAccuracy {
-            name: PARAM_NAMES[k],
-            unit: PARAM_UNITS[k],
-            truth: t[k],
-            estimate: e[k],
-            relative_error: relative_error(e[k], t[k]),
-            covered: ci95.map(|c| contains(c[k], t[k])),
+    PARAM_NAMES
+        .into_iter()
+        .zip(PARAM_UNITS)
+        .zip(estimate.values().into_iter().zip(truth.values()))
+        .map(|((name, unit), (estimate, truth))| ParameterAccuracy {
+            name,
+            unit,
+            truth,
+            estimate,
+            relative_error: relative_error(estimate, truth),
+            covered: ci95.and_then(|c| c.get(name)).map(|c| contains(c, truth)),
         })
         .collect()
 }
@@ -124,9 +127,9 @@ mod tests {
     fn relative_error_and_coverage_per_parameter() {
         let truth = MotorParams::paper();
         let est = scaled(&truth, 1.02);
-        let mut ci = est.values().map(|v| [v * 0.9, v * 1.1]);
+        let mut ci = MotorIntervals::relative(&est, 0.1);
         // Ts, the last, with an interval too narrow to hold the truth.
-        ci[5] = [est.ts_nm * 0.999, est.ts_nm * 1.001];
+        ci.ts_nm = [est.ts_nm * 0.999, est.ts_nm * 1.001];
         let acc = accuracy(&est, Some(&ci), &truth);
         assert_eq!(acc.len(), 6);
         assert_eq!(acc[0].name, "R");
@@ -155,7 +158,7 @@ mod tests {
             .iter()
             .map(|&s| {
                 let est = scaled(&truth, s);
-                let ci = est.values().map(|v| [v * 0.985, v * 1.015]);
+                let ci = MotorIntervals::relative(&est, 0.015);
                 accuracy(&est, Some(&ci), &truth)
             })
             .collect();

@@ -122,9 +122,9 @@ pub struct FullFit {
     /// in `std_error.r_ohm` \[Ω\], …); `None` if the fit has no degrees of freedom or a
     /// singular Jacobian (a parameter the data cannot determine).
     pub std_error: Option<MotorParams>,
-    /// 95 % intervals `[lo, hi]` (t distribution, as `nlparci`, on a Newey–West covariance),
-    /// SI units.
-    pub ci95: Option<[[f64; 2]; 6]>,
+    /// 95 % intervals `[lo, hi]` of R, L, k, f, J, Ts by name (t distribution, as `nlparci`,
+    /// on a Newey–West covariance), each in its parameter's SI unit.
+    pub ci95: Option<crate::MotorIntervals>,
     /// Correlation matrix of all fitted parameters ((6 + n) × (6 + n), in the order of
     /// [`FullFit::parameter_names`]).
     pub correlation: Option<DMatrix<f64>>,
@@ -742,7 +742,7 @@ pub(crate) fn set_intervals(
             }),
             _ => None,
         };
-        fit.ci95 = Some(std::array::from_fn(|i| iv.ci95[i]));
+        fit.ci95 = crate::MotorIntervals::from_solver_order(&iv.ci95);
         fit.correlation = Some(iv.correlation.clone());
         fit.theta_covariance = Some(cov);
     }

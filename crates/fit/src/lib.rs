@@ -48,6 +48,7 @@ mod feedforward;
 mod full_model;
 mod initial_state;
 mod input_uncertainty;
+mod intervals;
 mod lm;
 mod mechanical;
 mod model33;
@@ -82,6 +83,7 @@ pub use initial_state::{
 pub use input_uncertainty::{
     estimate_level, quantisation_bias_variance, LevelEstimate, LevelPrior, StepInputs, VoltageScale,
 };
+pub use intervals::MotorIntervals;
 pub use lm::{
     solve, LeastSquares, LevenbergMarquardt, LmReport, LmSettings, NormalEquations, Termination,
 };
@@ -101,7 +103,7 @@ pub use output_error::{
 pub use paper_method::{
     from_high_voltage, identify_paper, speed_check_c8, suggested_low_voltage_45,
     tau_m_as_printed_37, with_low_voltage, HighVoltageResult, PaperIdentification, SpeedCheck,
-    TwoTestFriction,
+    SteadyValues, TwoTestFriction,
 };
 pub use parameters::EffectEstimate;
 pub use plausibility::Refusal;

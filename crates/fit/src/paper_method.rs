@@ -185,6 +185,17 @@ pub fn suggested_low_voltage_45(r_c: f64, k_c: f64, f_c: f64) -> f64 {
     0.5 * (r_c / k_c + k_c / f_c)
 }
 
+/// The steady values the paper's method reads off the two step records (Table 2).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SteadyValues {
+    /// `Irm`: steady current of the high-voltage test \[A\].
+    pub i_rm_a: f64,
+    /// `Ωrm`: steady speed of the high-voltage test \[rad/s\] (NaN without a speed column).
+    pub omega_rm_rad_s: f64,
+    /// `Irb`: steady current of the low-voltage test \[A\].
+    pub i_rb_a: f64,
+}
+
 /// The paper's whole method on a high- and a low-voltage step test.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PaperIdentification {
@@ -196,9 +207,9 @@ pub struct PaperIdentification {
     pub low: TwoTestFriction,
     /// The motor: R, L, k, f, J of (38)–(43) with Ts of (48).
     pub params: motor_model::MotorParams,
-    /// `Irm`, `Ωrm`, `Irb` used \[A, rad/s, A\]: the last samples of the records, as the paper
-    /// took its Table 2 at t = 50 s.
-    pub steady_values: [f64; 3],
+    /// `Irm`, `Ωrm`, `Irb` used: the last samples of the records, as the paper took its Table 2
+    /// at t = 50 s.
+    pub steady_values: SteadyValues,
     /// The tachometer check (C.8) of ωn and ζ from the speed, or why it could not be made.
     pub speed_check: Result<SpeedCheck, FitError>,
 }
@@ -284,7 +295,11 @@ pub fn identify_paper(
         high: hv,
         low: lv,
         params,
-        steady_values: [i_rm, omega_rm, i_rb],
+        steady_values: SteadyValues {
+            i_rm_a: i_rm,
+            omega_rm_rad_s: omega_rm,
+            i_rb_a: i_rb,
+        },
         speed_check,
     })
 }

@@ -14,6 +14,7 @@ use motor_model::MotorParams;
 use crate::error::FitError;
 use crate::full_model::{identify_full_with_inputs, FullFit, StepTest, PARAM_NAMES, PARAM_UNITS};
 use crate::input_uncertainty::StepInputs;
+use crate::intervals::MotorIntervals;
 use crate::lm::LmSettings;
 use crate::output_error::{electrical_equation, ExcitedRecord};
 use crate::paper_method::{identify_paper, PaperIdentification};
@@ -139,15 +140,17 @@ pub struct ParameterEstimate {
 /// (in the order of [`PARAM_NAMES`]).
 pub fn parameter_estimates(
     params: &MotorParams,
-    ci95: Option<&[[f64; 2]; 6]>,
+    ci95: Option<&MotorIntervals>,
 ) -> Vec<ParameterEstimate> {
-    let values = params.values();
-    (0..values.len())
-        .map(|i| ParameterEstimate {
-            name: PARAM_NAMES[i],
-            unit: PARAM_UNITS[i],
-            value: values[i],
-            ci95: ci95.map(|c| c[i]),
+    PARAM_NAMES
+        .into_iter()
+        .zip(PARAM_UNITS)
+        .zip(params.values())
+        .map(|((name, unit), value)| ParameterEstimate {
+            name,
+            unit,
+            value,
+            ci95: ci95.and_then(|c| c.get(name)),
         })
         .collect()
 }
@@ -543,9 +546,9 @@ mod tests {
     #[test]
     fn poorly_determined_beyond_ten_percent() {
         let p = MotorParams::paper();
-        let mut ci = p.values().map(|v| [v * 0.95, v * 1.05]);
-        // f, the fourth, known to ±20 % only.
-        ci[3] = [p.f_nms_per_rad * 0.8, p.f_nms_per_rad * 1.2];
+        let mut ci = MotorIntervals::relative(&p, 0.05);
+        // f known to ±20 % only.
+        ci.f_nms_per_rad = [p.f_nms_per_rad * 0.8, p.f_nms_per_rad * 1.2];
         let e = parameter_estimates(&p, Some(&ci));
         let poor: Vec<&str> = e
             .iter()

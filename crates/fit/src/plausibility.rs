@@ -10,6 +10,7 @@ use std::fmt;
 use motor_model::{Domain, MotorParams};
 
 use crate::full_model::{Channel, ChannelQuality, FullFit};
+use crate::intervals::MotorIntervals;
 use crate::parameters::EffectEstimate;
 
 /// A time constant below this fraction of the sample period is not seen by the records: the
@@ -114,7 +115,7 @@ pub(crate) fn assess(fit: &FullFit, facts: &RecordFacts) -> Option<Refusal> {
 /// interval and left to the caller's significance test.
 pub(crate) fn assess_parts(
     params: &MotorParams,
-    ci95: Option<&[[f64; 2]; 6]>,
+    ci95: Option<&MotorIntervals>,
     effects: &[EffectEstimate],
     quality: &[ChannelQuality],
     facts: &RecordFacts,
@@ -165,13 +166,11 @@ pub(crate) fn assess_parts(
     let Some(ci) = ci95 else {
         return Some(Refusal::NoIntervals);
     };
-    let values = p.values();
-    let motor = (0..6).map(|i| {
-        (
-            crate::full_model::PARAM_NAMES[i],
-            0.5 * (ci[i][1] - ci[i][0]) / values[i],
-        )
-    });
+    let motor = ci
+        .named()
+        .into_iter()
+        .zip(p.values())
+        .map(|((name, [lo, hi]), value)| (name, 0.5 * (hi - lo) / value));
     let positive_effects = effects
         .iter()
         .filter(|e| {
@@ -257,8 +256,8 @@ mod tests {
     }
 
     /// Intervals of ± `rel` of each value.
-    fn ci(p: &MotorParams, rel: f64) -> [[f64; 2]; 6] {
-        p.values().map(|v| [v * (1.0 - rel), v * (1.0 + rel)])
+    fn ci(p: &MotorParams, rel: f64) -> MotorIntervals {
+        MotorIntervals::relative(p, rel)
     }
 
     fn quality(fit_percent: f64) -> ChannelQuality {
@@ -349,7 +348,7 @@ mod tests {
         );
         // k = 6e-12 N·m/A ± 3.5e7 % (9-sample records at 24 Hz): not determined.
         let mut wide = ci(&paper(), 0.01);
-        wide[2] = [-0.5, 0.8];
+        wide.k_nm_per_a = [-0.5, 0.8];
         assert!(matches!(
             assess_parts(&paper(), Some(&wide), &[], &[], &facts()),
             Some(Refusal::Undetermined { parameter: "k", .. })

@@ -125,7 +125,7 @@ fn fit_with(effect: &str, seed: u64) {
         let (mid, half) = (0.5 * (lo + hi), 0.5 * (hi - lo) * widen);
         [mid - half, mid + half]
     };
-    let ci = fit.ci95.unwrap();
+    let ci = fit.ci95.unwrap().named().map(|(_, c)| c);
     for (k, (got, want)) in fit.params.values().iter().zip(truth.values()).enumerate() {
         let [lo, hi] = wide(ci[k]);
         assert!(
@@ -212,7 +212,7 @@ fn motor_and_effect_with_uncertain_levels() {
     .unwrap();
     assert!(fit.accepted(), "{:?}", fit.failure());
     let names = fit.parameter_names();
-    let ci = fit.ci95.unwrap();
+    let ci = fit.ci95.unwrap().named().map(|(_, c)| c);
     for (k, want) in truth.values().into_iter().enumerate() {
         let [lo, hi] = ci[k];
         assert!(

@@ -126,7 +126,7 @@ fn judge(fit: &FullFit, what: &str) -> (usize, f64, f64) {
         fit.failure(),
         fit.params
     );
-    let ci = fit.ci95.expect("intervals");
+    let ci = fit.ci95.expect("intervals").named().map(|(_, c)| c);
     let se = fit.std_error.expect("standard errors").values();
     let (mut misses, mut worst_error, mut widest) = (0, 0.0f64, 0.0f64);
     for (k, (&got, want)) in fit.params.values().iter().zip(servo().values()).enumerate() {
@@ -224,7 +224,9 @@ fn a_steady_start_fitted_from_rest_is_not_a_result() {
         return;
     };
     let inside = fit.ci95.is_some_and(|ci| {
-        ci.iter()
+        ci.named()
+            .iter()
+            .map(|(_, c)| c)
             .zip(servo().values())
             .all(|([lo, hi], want)| *lo <= want && want <= *hi)
     });

@@ -48,7 +48,7 @@ fn staircase_with_noise_identifies_all_six_parameters_within_their_intervals() {
     let start = equation_error_start(&records).unwrap();
     let fit = identify_output_error(&records, &start, LmSettings::default()).unwrap();
     assert!(fit.termination.converged(), "{:?}", fit.termination);
-    let ci = fit.ci95.expect("intervals");
+    let ci = fit.ci95.expect("intervals").named().map(|(_, c)| c);
     for (k, (&got, want)) in fit.params.values().iter().zip(truth.values()).enumerate() {
         let [lo, hi] = ci[k];
         assert!(

@@ -196,60 +196,92 @@ impl Progress {
     }
 }
 
-pub fn run(a: &AcquireArgs) -> Result<()> {
-    if !(a.duration.is_finite() && a.duration > 0.0) {
-        return Err(BadInput(format!(
-            "--duration {}: expected a positive length [s]",
-            settings::shown(a.duration)
-        ))
-        .into());
+/// The test `motorid acquire` runs, validated from its arguments.
+pub struct Settings {
+    /// Serial port of the logger.
+    pub port: String,
+    /// The step test: voltage \[V\], length \[s\], rate \[Hz\], live streaming.
+    pub plan: TestPlan,
+    /// Counts to SI units, from `--calibration` or the emulator's default.
+    pub calibration: Calibration,
+    /// The output record.
+    pub output: std::path::PathBuf,
+    /// No progress on standard error.
+    pub quiet: bool,
+}
+
+impl Settings {
+    /// The options of `a`, each checked: `--duration` > 0, `--rate` within the logger's,
+    /// `--voltage` sane and within the calibrated range, the plan's length, and `--port` a
+    /// terminal device where it exists.
+    pub fn from_args(a: &AcquireArgs) -> Result<Settings> {
+        if !(a.duration.is_finite() && a.duration > 0.0) {
+            return Err(BadInput(format!(
+                "--duration {}: expected a positive length [s]",
+                settings::shown(a.duration)
+            ))
+            .into());
+        }
+        if a.rate == 0 || a.rate > daq_protocol::MAX_RATE_HZ {
+            return Err(BadInput(format!(
+                "--rate {}: expected 1 to {} Hz",
+                a.rate,
+                daq_protocol::MAX_RATE_HZ
+            ))
+            .into());
+        }
+        let volts = settings::volts("--voltage", a.voltage)?;
+        let cal = calibration(a)?;
+        // The voltage channel is calibrated over [lo, hi]: a step beyond it would clip, and the
+        // logger would apply a voltage nobody checked.
+        let [lo, hi] = cal.voltage;
+        if !(lo..=hi).contains(&volts) {
+            return Err(BadInput(format!(
+                "--voltage {}: outside the logger's calibrated voltage range {lo} to {hi} V ({}); give a step within it",
+                settings::shown(volts),
+                match &a.calibration {
+                    Some(path) => format!("from {}", path.display()),
+                    None => "the emulator's default calibration; see --calibration".into(),
+                }
+            ))
+            .into());
+        }
+        let plan = TestPlan {
+            volts,
+            duration_s: a.duration,
+            rate_hz: a.rate,
+            live: a.live,
+        };
+        plan.check()
+            .map_err(|e| BadInput(format!("--duration: {e}")))?;
+        if let Some(what) = not_a_serial_port(&a.port) {
+            return Err(BadInput(format!(
+                "--port {}: not a serial port ({what}); give the logger's port, e.g. /dev/ttyUSB0, or the PTY path `motorid emulate --pty` prints",
+                a.port
+            ))
+            .into());
+        }
+        Ok(Settings {
+            port: a.port.clone(),
+            plan,
+            calibration: cal,
+            output: a.output.clone(),
+            quiet: a.quiet,
+        })
     }
-    if a.rate == 0 || a.rate > daq_protocol::MAX_RATE_HZ {
-        return Err(BadInput(format!(
-            "--rate {}: expected 1 to {} Hz",
-            a.rate,
-            daq_protocol::MAX_RATE_HZ
-        ))
-        .into());
-    }
-    let volts = settings::volts("--voltage", a.voltage)?;
-    let cal = calibration(a)?;
-    // The voltage channel is calibrated over [lo, hi]: a step beyond it would clip, and the
-    // logger would apply a voltage nobody checked.
-    let [lo, hi] = cal.voltage;
-    if !(lo..=hi).contains(&volts) {
-        return Err(BadInput(format!(
-            "--voltage {}: outside the logger's calibrated voltage range {lo} to {hi} V ({}); give a step within it",
-            settings::shown(volts),
-            match &a.calibration {
-                Some(path) => format!("from {}", path.display()),
-                None => "the emulator's default calibration; see --calibration".into(),
-            }
-        ))
-        .into());
-    }
-    let plan = TestPlan {
-        volts,
-        duration_s: a.duration,
-        rate_hz: a.rate,
-        live: a.live,
-    };
-    plan.check()
-        .map_err(|e| BadInput(format!("--duration: {e}")))?;
-    if let Some(what) = not_a_serial_port(&a.port) {
-        return Err(BadInput(format!(
-            "--port {}: not a serial port ({what}); give the logger's port, e.g. /dev/ttyUSB0, or the PTY path `motorid emulate --pty` prints",
-            a.port
-        ))
-        .into());
-    }
+}
+
+/// Runs the test through the logger and writes the record.
+pub fn run(a: &Settings) -> Result<()> {
+    let (plan, cal) = (&a.plan, &a.calibration);
+    let volts = plan.volts;
     let port = serialport::new(&a.port, daq_protocol::BAUD)
         .timeout(Duration::from_millis(50))
         .open()
         .map_err(|e| BadInput(format!("--port {}: cannot open ({e})", a.port)))?;
     let mut link = SerialLink(port);
-    let mut progress = Progress::new(a.duration);
-    let result = acquire(&mut link, &plan, |stats| {
+    let mut progress = Progress::new(plan.duration_s);
+    let result = acquire(&mut link, plan, |stats| {
         if !a.quiet {
             progress.show(stats, false);
         }
@@ -270,12 +302,12 @@ pub fn run(a: &AcquireArgs) -> Result<()> {
         progress.show(&acquired.stats, true);
         progress.finish();
     }
-    let record = to_record(&acquired, &cal);
+    let record = to_record(&acquired, cal);
     let meta = vec![
         ("source".to_string(), "motorid acquire".to_string()),
         ("port".to_string(), a.port.clone()),
         ("input".to_string(), format!("step {volts} V at 0 s")),
-        ("calibration".to_string(), serde_json::to_string(&cal)?),
+        ("calibration".to_string(), serde_json::to_string(cal)?),
         (
             "range_voltage".to_string(),
             format!("{},{}", cal.voltage[0], cal.voltage[1]),
@@ -290,8 +322,8 @@ pub fn run(a: &AcquireArgs) -> Result<()> {
     eprintln!(
         "wrote {} samples ({} s at {} Hz) to {}; {} bytes, {} frames, {} failed their check, {} lost, {} retries",
         record.t.len(),
-        a.duration,
-        a.rate,
+        plan.duration_s,
+        plan.rate_hz,
         a.output.display(),
         s.bytes,
         s.frames,

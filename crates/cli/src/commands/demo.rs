@@ -28,7 +28,21 @@ fn mark(same: bool) -> &'static str {
     }
 }
 
-pub fn run(a: &DemoArgs) -> Result<()> {
+/// What `motorid demo` writes besides its report, from its arguments.
+pub struct Settings {
+    /// Folder for the two simulated records, if asked for.
+    pub out: Option<std::path::PathBuf>,
+}
+
+impl Settings {
+    /// The options of `a` (the folder is checked when it is written).
+    pub fn from_args(a: &DemoArgs) -> Settings {
+        Settings { out: a.out.clone() }
+    }
+}
+
+/// Runs the paper's example end to end and prints it beside the paper's tables.
+pub fn run(a: &Settings) -> Result<()> {
     let motor = MotorParams::paper();
     let d = Derived::new(&motor);
     println!("motorid demo — the simulated motor of the paper's Sec. 4.1");

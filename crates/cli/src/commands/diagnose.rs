@@ -9,9 +9,7 @@ use fit::diagnose::{
     diagnose, diagnose_inverse, Assessment, AxisGeometry, CandidateReport, DiagnoseError,
     DiagnoseProgress, DiagnoseSettings, Diagnosis, InverseDiagnoseSettings, SeparatingTest, Stage,
 };
-use fit::{
-    equation_error_start, ExcitedRecord, InverseModelSettings, StepMethod, PARAM_NAMES, PARAM_UNITS,
-};
+use fit::{equation_error_start, ExcitedRecord, InverseModelSettings, StepMethod};
 use motor_model::EffectKind;
 use serde_json::json;
 
@@ -229,12 +227,9 @@ fn refitted(c: &CandidateReport) -> bool {
 
 /// The nominal motor's parameters with units and intervals, for JSON.
 fn motor_json(d: &Diagnosis) -> serde_json::Value {
-    PARAM_NAMES
+    fit::parameter_estimates(&d.nominal.params, d.nominal.ci95.as_ref())
         .iter()
-        .zip(PARAM_UNITS)
-        .zip(d.nominal.params.values())
-        .enumerate()
-        .map(|(i, ((n, u), v))| json!({"name": n, "unit": u, "value": v, "ci95": d.nominal.ci95.map(|c| c[i])}))
+        .map(|p| json!({"name": p.name, "unit": p.unit, "value": p.value, "ci95": p.ci95}))
         .collect()
 }
 

@@ -9,7 +9,7 @@
 use anyhow::Result;
 use fit::{identify_inverse_model, InverseModelSettings};
 use motor_model::{
-    pulse_split, relative_error_percent, simulate_pd_axis, PdController,
+    pulse_split, relative_error_percent, simulate_pd_axis, AxisParams, PdController,
     EMPS_DRIVE_GAIN_N_PER_V as DRIVE_GAIN_N_PER_V, EMPS_KP_PER_S, EMPS_KV_V_PER_M_S,
     EMPS_PULSE_COMMAND_V, EMPS_PULSE_FORCE_N,
 };
@@ -22,8 +22,27 @@ use crate::plot::{self, Panel, Series};
 use crate::record_csv::{read_table, Table};
 use crate::BadInput;
 
-/// Published IDIM-LS estimates (M, Fv, Fc, offset) the benchmark reports.
-const REFERENCE: [f64; 4] = [95.1089, 203.5034, 20.3935, -3.1648];
+/// Published IDIM-LS estimates the benchmark reports: M \[kg\], Fv \[N·s/m\], Fc \[N\] and
+/// the offset \[N\].
+const REFERENCE: AxisParams = AxisParams {
+    mass_kg: 95.1089,
+    viscous_ns_per_m: 203.5034,
+    coulomb_n: 20.3935,
+    offset_n: -3.1648,
+};
+
+/// Each identified parameter of `axis` beside the published one ([`REFERENCE`]): name (as in
+/// [`fit::MECHANICAL_NAMES`]), identified and published value, in the axis's units.
+fn against_reference(axis: &AxisParams) -> [(&'static str, f64, f64); 4] {
+    let r = &REFERENCE;
+    let [mass, viscous, coulomb, offset] = fit::MECHANICAL_NAMES;
+    [
+        (mass, axis.mass_kg, r.mass_kg),
+        (viscous, axis.viscous_ns_per_m, r.viscous_ns_per_m),
+        (coulomb, axis.coulomb_n, r.coulomb_n),
+        (offset, axis.offset_n, r.offset_n),
+    ]
+}
 
 fn column<'a>(table: &'a Table, name: &str, file: &str) -> Result<&'a [f64]> {
     table.column(name).ok_or_else(|| {
@@ -34,7 +53,30 @@ fn column<'a>(table: &'a Table, name: &str, file: &str) -> Result<&'a [f64]> {
     })
 }
 
-pub fn run(a: &EmpsArgs) -> Result<()> {
+/// Where `motorid emps` reads the benchmark and what it writes, from its arguments.
+pub struct Settings {
+    /// Folder holding `DATA_EMPS.csv` and `DATA_EMPS_PULSES.csv`.
+    pub dir: std::path::PathBuf,
+    /// Folder for the figure, if one is asked for.
+    pub plot: Option<std::path::PathBuf>,
+    /// One JSON object instead of the report.
+    pub json: bool,
+}
+
+impl Settings {
+    /// The options of `a` (paths are checked when they are read).
+    pub fn from_args(a: &EmpsArgs) -> Settings {
+        Settings {
+            dir: a.dir.clone(),
+            plot: a.plot.clone(),
+            json: a.json,
+        }
+    }
+}
+
+/// Identifies the axis on the estimation record, simulates both records in closed loop and
+/// reports the gaps with and without the force pulses.
+pub fn run(a: &Settings) -> Result<()> {
     let est_path = a.dir.join("DATA_EMPS.csv");
     let val_path = a.dir.join("DATA_EMPS_PULSES.csv");
     let (est, val) = (read_table(&est_path)?, read_table(&val_path)?);
@@ -156,8 +198,8 @@ pub fn run(a: &EmpsArgs) -> Result<()> {
     }
     if a.json {
         let report = json!({
-            "identified": fit.estimates(fit::MECHANICAL_UNITS_LINEAR).iter().zip(REFERENCE).map(|(e, r)| json!({
-                "name": e.name, "value": e.value, "reference": r, "relative_difference": e.value / r - 1.0,
+            "identified": against_reference(&axis).iter().map(|&(name, value, r)| json!({
+                "name": name, "value": value, "reference": r, "relative_difference": value / r - 1.0,
             })).collect::<Vec<_>>(),
             "estimation_record": {"position_relerr_percent": est_pos, "force_relerr_percent": est_force},
             "validation_record": {
@@ -175,12 +217,7 @@ pub fn run(a: &EmpsArgs) -> Result<()> {
     println!(
         "EMPS — identified on {est_name} (force = {DRIVE_GAIN_N_PER_V} × vir), inverse model:"
     );
-    for (e, r) in fit
-        .estimates(fit::MECHANICAL_UNITS_LINEAR)
-        .iter()
-        .zip(REFERENCE)
-    {
-        let (name, v) = (e.name, e.value);
+    for (name, v, r) in against_reference(&axis) {
         println!(
             "  {name:<6} {v:>10.4}   published IDIM-LS {r:>10.4}   ({:+.2} %)",
             100.0 * (v / r - 1.0)

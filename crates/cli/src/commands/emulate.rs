@@ -43,24 +43,49 @@ fn faults(text: &str) -> Result<LineFaults> {
     Ok(f)
 }
 
-pub fn run(a: &EmulateArgs) -> Result<()> {
-    let plant = Plant {
-        motor: settings::motor(&a.motor.motor)?,
-        effects: settings::effects(&a.effects)?,
-        noise_lsb: a.noise_lsb,
-        seed: a.seed,
-        ..Plant::default()
-    };
-    if !(a.noise_lsb.is_finite() && a.noise_lsb >= 0.0) {
-        return Err(BadInput(format!(
-            "--noise-lsb {}: expected zero or more",
-            a.noise_lsb
-        ))
-        .into());
+/// The emulated logger `motorid emulate` serves, validated from its arguments.
+pub struct Settings {
+    /// The simulated motor, its effects and the ADC noise.
+    pub plant: Plant,
+    /// Sample and send in real time instead of as fast as possible.
+    pub realtime: bool,
+    /// Faults on what the logger sends, if any.
+    pub faults: Option<LineFaults>,
+    /// No messages on standard error.
+    pub quiet: bool,
+}
+
+impl Settings {
+    /// The options of `a`, each checked: `--motor`, `--effect`, `--noise-lsb` ≥ 0, `--faults`.
+    pub fn from_args(a: &EmulateArgs) -> Result<Settings> {
+        let plant = Plant {
+            motor: settings::motor(&a.motor.motor)?,
+            effects: settings::effects(&a.effects)?,
+            noise_lsb: a.noise_lsb,
+            seed: a.seed,
+            ..Plant::default()
+        };
+        if !(a.noise_lsb.is_finite() && a.noise_lsb >= 0.0) {
+            return Err(BadInput(format!(
+                "--noise-lsb {}: expected zero or more",
+                a.noise_lsb
+            ))
+            .into());
+        }
+        Ok(Settings {
+            plant,
+            realtime: a.realtime,
+            faults: a.faults.as_deref().map(faults).transpose()?,
+            quiet: a.quiet,
+        })
     }
-    let mut emulator = Emulator::new(plant, a.realtime);
-    if let Some(text) = &a.faults {
-        emulator = emulator.with_faults(faults(text)?);
+}
+
+/// Serves the emulated logger on a new pseudo-terminal until stopped (or the `close` fault).
+pub fn run(a: &Settings) -> Result<()> {
+    let mut emulator = Emulator::new(a.plant.clone(), a.realtime);
+    if let Some(faults) = a.faults {
+        emulator = emulator.with_faults(faults);
     }
     let (mut master, slave) = TTYPort::pair().context("cannot create a pseudo-terminal pair")?;
     let path = slave.name().context("the pseudo-terminal has no name")?;

@@ -11,6 +11,7 @@ use motor_model::{Derived, Effects, Input, MotorParams, NoiseRng};
 
 use crate::args::FleetArgs;
 use crate::output;
+use crate::progress::Jobs;
 use crate::record_csv::write_file;
 use crate::settings::Logger;
 use crate::simulated::{measured_step, metadata};
@@ -38,25 +39,61 @@ pub fn record_timing(motor: &MotorParams) -> (f64, f64) {
     (duration, rate)
 }
 
-pub fn run(a: &FleetArgs) -> Result<()> {
-    if a.motors == 0 || a.motors > 100_000 {
-        return Err(BadInput(format!("--motors {}: expected 1 to 100000", a.motors)).into());
+/// The fleet `motorid fleet` writes, validated from its arguments.
+pub struct Settings {
+    /// Folder the motors go into.
+    pub out: std::path::PathBuf,
+    /// Number of motors.
+    pub motors: usize,
+    /// Each parameter is the base motor's times a factor in `[1/spread, spread]` \[-\].
+    pub spread: f64,
+    /// The base motor.
+    pub base: MotorParams,
+    /// High-voltage step \[V\].
+    pub high_voltage_v: f64,
+    /// Low-voltage step \[V\].
+    pub low_voltage_v: f64,
+    /// Seed of the parameter draws and of the noise.
+    pub seed: u64,
+    /// No progress messages.
+    pub quiet: bool,
+}
+
+impl Settings {
+    /// The options of `a`, each checked: `--motors` 1–100000, `--spread` 1–[`MAX_SPREAD`],
+    /// the step voltages ([`settings::volts`]), `--motor`.
+    pub fn from_args(a: &FleetArgs) -> Result<Settings> {
+        if a.motors == 0 || a.motors > 100_000 {
+            return Err(BadInput(format!("--motors {}: expected 1 to 100000", a.motors)).into());
+        }
+        if !(a.spread.is_finite() && (1.0..=MAX_SPREAD).contains(&a.spread)) {
+            return Err(BadInput(format!(
+                "--spread {}: expected a factor from 1 to {MAX_SPREAD}",
+                settings::shown(a.spread)
+            ))
+            .into());
+        }
+        Ok(Settings {
+            high_voltage_v: settings::volts("--high-voltage", a.high_voltage)?,
+            low_voltage_v: settings::volts("--low-voltage", a.low_voltage)?,
+            base: settings::motor(&a.motor.motor)?,
+            out: a.out.clone(),
+            motors: a.motors,
+            spread: a.spread,
+            seed: a.seed,
+            quiet: a.quiet,
+        })
     }
-    if !(a.spread.is_finite() && (1.0..=MAX_SPREAD).contains(&a.spread)) {
-        return Err(BadInput(format!(
-            "--spread {}: expected a factor from 1 to {MAX_SPREAD}",
-            settings::shown(a.spread)
-        ))
-        .into());
-    }
-    settings::volts("--high-voltage", a.high_voltage)?;
-    settings::volts("--low-voltage", a.low_voltage)?;
-    let base = settings::motor(&a.motor.motor)?;
+}
+
+/// Draws the motors and writes each one's truth and step records into its folder.
+pub fn run(a: &Settings) -> Result<()> {
+    let base = a.base;
     std::fs::create_dir_all(&a.out)
         .map_err(|e| BadInput(format!("cannot create {}: {e}", a.out.display())))?;
     let mut rng = NoiseRng::new(a.seed);
     let width = a.motors.to_string().len().max(3);
-    let started = std::time::Instant::now();
+    let progress = Jobs::new(a.motors, "motors written", a.quiet);
     for m in 0..a.motors {
         let values = base
             .values()
@@ -68,8 +105,8 @@ pub fn run(a: &FleetArgs) -> Result<()> {
         let (duration, rate) = record_timing(&motor);
         // Each drawn motor must break away within its records, or its low step is useless.
         for (option, volts) in [
-            ("--high-voltage", a.high_voltage),
-            ("--low-voltage", a.low_voltage),
+            ("--high-voltage", a.high_voltage_v),
+            ("--low-voltage", a.low_voltage_v),
         ] {
             settings::breakaway_step(option, &motor, volts, duration)
                 .map_err(|e| BadInput(format!("{name}: {e:#}")))?;
@@ -82,8 +119,8 @@ pub fn run(a: &FleetArgs) -> Result<()> {
             serde_json::to_string_pretty(&motor)?.as_bytes(),
         )?;
         for (name, volts, k) in [
-            ("high.csv", a.high_voltage, 0u64),
-            ("low.csv", a.low_voltage, 1),
+            ("high.csv", a.high_voltage_v, 0u64),
+            ("low.csv", a.low_voltage_v, 1),
         ] {
             // On the sample grid exactly (the grid is i·(1/rate)): the identification takes the
             // first sample at the new level as the step instant.
@@ -98,15 +135,9 @@ pub fn run(a: &FleetArgs) -> Result<()> {
             meta.push(("measurement".into(), serde_json::to_string(&measurement)?));
             write_file(&dir.join(name), &rec, &meta)?;
         }
-        if !a.quiet && ((m + 1) % (a.motors / 10).max(1) == 0 || m + 1 == a.motors) {
-            eprintln!(
-                "  {}/{} motors written ({:.1} s)",
-                m + 1,
-                a.motors,
-                started.elapsed().as_secs_f64()
-            );
-        }
+        progress.done(m + 1, String::new);
     }
+    drop(progress);
     println!("{} motors in {}", a.motors, a.out.display());
     Ok(())
 }

@@ -18,9 +18,28 @@ pub fn to_json(p: &MotorParams) -> serde_json::Value {
     v
 }
 
-pub fn run(a: &ModelArgs) -> Result<()> {
-    let p = settings::motor(&a.motor.motor)?;
-    if a.json {
+/// What `motorid model` prints, validated from its arguments.
+pub struct Settings {
+    /// The motor whose constants are derived.
+    pub motor: MotorParams,
+    /// One JSON object instead of the table.
+    pub json: bool,
+}
+
+impl Settings {
+    /// `--motor` read and checked ([`settings::motor`]).
+    pub fn from_args(a: &ModelArgs) -> Result<Settings> {
+        Ok(Settings {
+            motor: settings::motor(&a.motor.motor)?,
+            json: a.json,
+        })
+    }
+}
+
+/// Prints the derived constants (16)–(26) of the motor, as a table or one JSON object.
+pub fn run(s: &Settings) -> Result<()> {
+    let p = s.motor;
+    if s.json {
         println!("{}", serde_json::to_string_pretty(&to_json(&p))?);
         return Ok(());
     }

@@ -12,6 +12,7 @@ use motor_model::{MotorParams, NoiseRng};
 use serde_json::json;
 
 use crate::args::MontecarloArgs;
+use crate::progress::Jobs;
 use crate::settings::{self, Logger};
 use crate::simulated::record_at;
 use crate::{BadInput, NotConverged};
@@ -46,16 +47,26 @@ struct Chain {
 }
 
 /// The validated settings of a Monte Carlo study.
-struct Study {
+pub struct Settings {
+    /// The nominal motor.
     motor: MotorParams,
+    /// The simulated logger.
     logger: Logger,
+    /// How each run's motor and measurement vary.
     chain: Chain,
+    /// High-voltage step \[V\].
     high_voltage_v: f64,
+    /// Low-voltage step \[V\].
     low_voltage_v: f64,
+    /// First noise seed.
     seed: u64,
+    /// Number of record pairs.
+    runs: usize,
+    /// One JSON object instead of the table.
+    json: bool,
 }
 
-fn one_run(study: &Study, i: usize) -> Result<Run> {
+fn one_run(study: &Settings, i: usize) -> Result<Run> {
     let seed = study.seed.wrapping_add(2 * i as u64);
     let (a, nominal, logger) = (&study.chain, &study.motor, &study.logger);
     // Run i's own motor and step instants (a generator apart from the noise's).
@@ -119,84 +130,93 @@ fn one_run(study: &Study, i: usize) -> Result<Run> {
     })
 }
 
-pub fn run(a: &MontecarloArgs) -> Result<()> {
-    if a.runs == 0 || a.runs > MAX_RUNS {
-        return Err(BadInput(format!(
-            "--runs {}: expected 1 to {MAX_RUNS} record pairs",
-            a.runs
-        ))
-        .into());
-    }
-    // Every setting is checked before the first run: a study whose runs cannot succeed is
-    // refused with what to fix, not run into a table of NaN.
-    let motor = settings::motor(&a.motor.motor)?;
-    let logger = Logger::new(a.duration, a.rate, a.adc_bits, a.noise_lsb, a.encoder_cpr)?;
-    let study = Study {
-        high_voltage_v: settings::breakaway_step(
-            "--high-voltage",
-            &motor,
-            a.high_voltage,
-            logger.duration_s,
-        )?,
-        low_voltage_v: settings::breakaway_step(
-            "--low-voltage",
-            &motor,
-            a.low_voltage,
-            logger.duration_s,
-        )?,
-        motor,
-        logger,
-        chain: Chain {
-            voltage_noise_lsb: match a.voltage_noise_lsb {
-                Some(v) if !(v.is_finite() && v >= 0.0) => {
-                    return Err(BadInput(format!(
-                        "--voltage-noise-lsb {v}: expected a noise level of 0 LSB or more"
-                    ))
-                    .into())
-                }
-                other => other,
-            },
-            subsample_step: a.subsample_step,
-            motor_spread: if a.motor_spread.is_finite() && (0.0..0.5).contains(&a.motor_spread) {
-                a.motor_spread
-            } else {
-                return Err(BadInput(format!(
-                    "--motor-spread {}: expected a relative spread from 0 to 0.5",
+impl Settings {
+    /// The options of `a`, every one checked before the first run: `--runs`, `--motor`, the
+    /// logger, the two steps (they must break away within the record), the variations.
+    pub fn from_args(a: &MontecarloArgs) -> Result<Settings> {
+        if a.runs == 0 || a.runs > MAX_RUNS {
+            return Err(BadInput(format!(
+                "--runs {}: expected 1 to {MAX_RUNS} record pairs",
+                a.runs
+            ))
+            .into());
+        }
+        // Every setting is checked before the first run: a study whose runs cannot succeed is
+        // refused with what to fix, not run into a table of NaN.
+        let motor = settings::motor(&a.motor.motor)?;
+        let logger = Logger::new(a.duration, a.rate, a.adc_bits, a.noise_lsb, a.encoder_cpr)?;
+        Ok(Settings {
+            high_voltage_v: settings::breakaway_step(
+                "--high-voltage",
+                &motor,
+                a.high_voltage,
+                logger.duration_s,
+            )?,
+            low_voltage_v: settings::breakaway_step(
+                "--low-voltage",
+                &motor,
+                a.low_voltage,
+                logger.duration_s,
+            )?,
+            motor,
+            logger,
+            chain: Chain {
+                voltage_noise_lsb: match a.voltage_noise_lsb {
+                    Some(v) if !(v.is_finite() && v >= 0.0) => {
+                        return Err(BadInput(format!(
+                            "--voltage-noise-lsb {v}: expected a noise level of 0 LSB or more"
+                        ))
+                        .into())
+                    }
+                    other => other,
+                },
+                subsample_step: a.subsample_step,
+                motor_spread: if a.motor_spread.is_finite() && (0.0..0.5).contains(&a.motor_spread)
+                {
                     a.motor_spread
-                ))
-                .into());
+                } else {
+                    return Err(BadInput(format!(
+                        "--motor-spread {}: expected a relative spread from 0 to 0.5",
+                        a.motor_spread
+                    ))
+                    .into());
+                },
+                vary_range: a.vary_range,
             },
-            vary_range: a.vary_range,
-        },
-        seed: a.seed,
-    };
-    let threads = crate::parallel::threads(a.runs);
+            seed: a.seed,
+            runs: a.runs,
+            json: a.json,
+        })
+    }
+}
+
+/// Simulates and identifies the record pairs in parallel and prints the accuracy of both
+/// methods and the coverage of the full method's intervals.
+pub fn run(study: &Settings) -> Result<()> {
+    let threads = crate::parallel::threads(study.runs);
     let started = std::time::Instant::now();
     let identified = AtomicUsize::new(0);
     let failed = AtomicUsize::new(0);
+    let progress = Jobs::new(study.runs, "record pairs done", study.json);
     let results = crate::parallel::map(
-        a.runs,
+        study.runs,
         |i| {
-            let result = one_run(&study, i);
+            let result = one_run(study, i);
             let counter = if result.is_ok() { &identified } else { &failed };
             counter.fetch_add(1, Ordering::Relaxed);
             result
         },
         |n| {
-            if !a.json && (n % (a.runs / 10).max(1) == 0 || n == a.runs) {
+            progress.done(n, || {
                 let (ok, bad) = (
                     identified.load(Ordering::Relaxed),
                     failed.load(Ordering::Relaxed),
                 );
-                eprintln!(
-                    "  {}/{} record pairs done: {ok} identified, {bad} failed ({:.1} s)",
-                    ok + bad,
-                    a.runs,
-                    started.elapsed().as_secs_f64()
-                );
-            }
+                format!(": {ok} identified, {bad} failed")
+            })
         },
     );
+    drop(progress);
     let mut runs = Vec::new();
     let mut failures = Vec::new();
     for r in results {
@@ -209,7 +229,7 @@ pub fn run(a: &MontecarloArgs) -> Result<()> {
         let first = failures.first().map_or("", String::as_str);
         return Err(NotConverged(format!(
             "all {} runs failed; nothing to report. The first: {first}",
-            a.runs
+            study.runs
         ))
         .into());
     }
@@ -222,7 +242,7 @@ pub fn run(a: &MontecarloArgs) -> Result<()> {
     let paper_applied = runs.iter().filter(|r| r.paper.is_some()).count();
     let paper = summarize(runs.iter().filter_map(|r| r.paper.as_deref()));
     let full = summarize(runs.iter().map(|r| r.full.as_slice()));
-    let rows: Vec<_> = parameter_estimates(&motor, None)
+    let rows: Vec<_> = parameter_estimates(&study.motor, None)
         .into_iter()
         .zip(paper.iter().zip(&full))
         .map(|(truth, (paper, full))| {
@@ -235,7 +255,7 @@ pub fn run(a: &MontecarloArgs) -> Result<()> {
             )
         })
         .collect();
-    if a.json {
+    if study.json {
         let report = json!({
             "runs": runs.len(), "failed": failures, "paper_method_applied": paper_applied, "runs_with_ci": with_ci, "converged": converged, "seconds": elapsed,
             "parameters": rows.iter().map(|(name, truth, paper, full, coverage)| json!({
@@ -244,11 +264,11 @@ pub fn run(a: &MontecarloArgs) -> Result<()> {
             })).collect::<Vec<_>>(),
         });
         println!("{}", serde_json::to_string_pretty(&report)?);
-        return failed_runs(&failures, a.runs);
+        return failed_runs(&failures, study.runs);
     }
     println!(
         "Monte Carlo: {} record pairs ({} V and {} V steps, {} s at {} Hz; {}-bit ADC, {} LSB noise, encoder {} counts/rev, speed from the encoder)",
-        runs.len(), study.high_voltage_v, study.low_voltage_v, a.duration, a.rate, a.adc_bits, a.noise_lsb, a.encoder_cpr
+        runs.len(), study.high_voltage_v, study.low_voltage_v, study.logger.duration_s, study.logger.rate_hz, study.logger.adc_bits, study.logger.noise_lsb, study.logger.encoder_cpr
     );
     println!(
         "  param        truth   paper median |error|   full median |error|   full 95% CI coverage"
@@ -276,12 +296,16 @@ pub fn run(a: &MontecarloArgs) -> Result<()> {
         );
     }
     if !failures.is_empty() {
-        println!("{} of {} runs failed; the first:", failures.len(), a.runs);
+        println!(
+            "{} of {} runs failed; the first:",
+            failures.len(),
+            study.runs
+        );
         for f in failures.iter().take(5) {
             println!("  {f}");
         }
     }
-    failed_runs(&failures, a.runs)
+    failed_runs(&failures, study.runs)
 }
 
 /// Exit code 3 when any run failed: the table covers only the runs that succeeded.

@@ -267,6 +267,7 @@ fn covered(fit: &fit::FullFit, truth: &Motor, inside: &mut [usize; 6]) {
     if std::env::var_os("COVERAGE_VERBOSE").is_some() {
         // Each parameter's error in units of its 95 % half-width (|z| > 1: a miss).
         let z: Vec<String> = fit.ci95.map_or(Vec::new(), |ci| {
+            let ci = ci.named().map(|(_, c)| c);
             fit.params
                 .values()
                 .iter()
@@ -284,7 +285,7 @@ fn covered(fit: &fit::FullFit, truth: &Motor, inside: &mut [usize; 6]) {
             rel.join(" ")
         );
     }
-    if let Some(ci) = fit.ci95 {
+    if let Some(ci) = fit.ci95.map(|ci| ci.named().map(|(_, c)| c)) {
         for k in 0..6 {
             if ci[k][0] <= truth[k] && truth[k] <= ci[k][1] {
                 inside[k] += 1;

@@ -16,11 +16,13 @@ use fit::{
 use motor_model::MotorParams;
 use serde_json::{json, Value};
 
-use crate::args::IdentifyArgs;
 use crate::output;
+use crate::progress::Jobs;
 use crate::record_csv::ColumnMap;
 use crate::steps::{fit_excited, identify_pair, in_order, load_excited, load_step, LoadedExcited};
 use crate::{parallel, settings, BadInput, NotConverged};
+
+use super::Settings;
 
 /// Outcome of one folder.
 enum Outcome {
@@ -214,7 +216,8 @@ fn summary_csv(rows: &[Row]) -> String {
     out
 }
 
-pub fn run(a: &IdentifyArgs, dir: &Path) -> Result<()> {
+/// Identifies every motor folder under `dir` in parallel and writes the summaries.
+pub fn run(a: &Settings, dir: &Path) -> Result<()> {
     let folders = motor_folders(dir)?;
     let n = folders.len();
     let threads = parallel::threads(n);
@@ -222,18 +225,13 @@ pub fn run(a: &IdentifyArgs, dir: &Path) -> Result<()> {
     if !a.quiet {
         eprintln!("identifying {n} motors on {threads} threads…");
     }
+    let progress = Jobs::new(n, "motors", a.quiet);
     let rows = parallel::map(
         n,
         |i| identify_folder(&folders[i]),
-        |done| {
-            if !a.quiet && (done % (n / 10).max(1) == 0 || done == n) {
-                eprintln!(
-                    "  {done}/{n} motors ({:.1} s)",
-                    started.elapsed().as_secs_f64()
-                );
-            }
-        },
+        |done| progress.done(done, String::new),
     );
+    drop(progress);
     let elapsed = started.elapsed().as_secs_f64();
     let csv_path = dir.join("summary.csv");
     let json_path = dir.join("summary.json");

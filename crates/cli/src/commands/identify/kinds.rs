@@ -7,10 +7,9 @@ use fit::{
 };
 use serde_json::{json, Value};
 
-use crate::args::IdentifyArgs;
 use crate::{BadInput, NotConverged};
 
-use super::{channels_json, print_channels, sig};
+use super::{channels_json, print_channels, sig, Settings};
 
 /// The option that gives a known constant.
 fn option(c: KnownConstant) -> &'static str {
@@ -73,19 +72,23 @@ pub fn kind_json(kind: &RecordKind) -> Value {
     })
 }
 
-/// The known constants `a` gives, checked positive and finite.
-pub fn known_constants(a: &IdentifyArgs) -> Result<KnownConstants> {
+/// The known constants given, `resistance` \[Ω\] and `torque_constant` \[N·m/A\], checked
+/// positive and finite.
+pub fn known_constants(
+    resistance: Option<f64>,
+    torque_constant: Option<f64>,
+) -> Result<KnownConstants> {
     for (name, value) in [
-        ("--resistance", a.resistance),
-        ("--torque-constant", a.torque_constant),
+        ("--resistance", resistance),
+        ("--torque-constant", torque_constant),
     ] {
         if let Some(v) = value.filter(|v| !(v.is_finite() && *v > 0.0)) {
             return Err(BadInput(format!("{name} {v}: expected a positive number")).into());
         }
     }
     Ok(KnownConstants {
-        resistance: a.resistance.is_some(),
-        torque_constant: a.torque_constant.is_some(),
+        resistance: resistance.is_some(),
+        torque_constant: torque_constant.is_some(),
     })
 }
 
@@ -144,12 +147,7 @@ fn tau_e_json(tau_e: &TauE) -> Value {
 
 /// Prints the voltage-and-speed report (`--json` or the table) of `fit` on `files`, with
 /// `known` = (R, k) if given; exit 3 when the fit did not converge or gave no intervals.
-pub fn report(
-    a: &IdentifyArgs,
-    kind: &RecordKind,
-    fit: &FeedforwardFit,
-    files: &[&str],
-) -> Result<()> {
+pub fn report(a: &Settings, kind: &RecordKind, fit: &FeedforwardFit, files: &[&str]) -> Result<()> {
     let known = a.resistance.zip(a.torque_constant);
     let estimates = fit.estimates(known);
     if a.json {

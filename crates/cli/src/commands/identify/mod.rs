@@ -10,8 +10,10 @@ use fit::{
     InverseModelSettings, KnownConstants, OffsetStatus, PaperIdentification, RecordKind, RecordSet,
     TorqueConstantError, MECHANICAL_NAMES, PARAM_NAMES,
 };
-use motor_model::Derived;
+use motor_model::{Derived, MotorParams};
 use serde_json::{json, Value};
+
+use std::path::PathBuf;
 
 use crate::args::{AxisArg, DriveArg, IdentifyArgs};
 use crate::figures::FigureRecord;
@@ -22,6 +24,168 @@ use crate::steps::{
     in_order, load_step_pair, measured_channels,
 };
 use crate::{BadInput, NotConverged};
+
+/// Where the records of an identification come from.
+#[derive(Debug, Clone)]
+pub enum Source {
+    /// A high- and a low-voltage step record (`--high`, `--low`).
+    Pair {
+        /// High-voltage step record.
+        high: PathBuf,
+        /// Low-voltage step record.
+        low: PathBuf,
+    },
+    /// Steady-state records at several voltages (`--steady`), with R \[Ω\] and k \[N·m/A\]
+    /// known.
+    Steady {
+        /// The records.
+        paths: Vec<PathBuf>,
+        /// Known armature resistance R \[Ω\].
+        resistance_ohm: f64,
+        /// Known torque constant k \[N·m/A\].
+        torque_constant: f64,
+    },
+    /// Records of any waveform (`--record`), voltage- or current-driven as `drive` says.
+    Records(Vec<PathBuf>),
+    /// A folder of motor folders (`--batch`).
+    Batch(PathBuf),
+}
+
+/// Whether positions are angles or lengths (the units of J, f, Ts).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Axis {
+    /// Angles in rad: kg·m², N·m·s/rad, N·m.
+    Rotary,
+    /// Positions in m: kg, N·s/m, N.
+    Linear,
+}
+
+/// What `motorid identify` identifies and how, validated from its arguments.
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// The records.
+    pub source: Source,
+    /// What drives the axis: voltage steps or a current loop.
+    pub drive: Drive,
+    /// The step-pair method.
+    pub method: fit::StepMethod,
+    /// `--resistance` R \[Ω\], checked positive (for `--record` files without a current).
+    pub resistance: Option<f64>,
+    /// `--torque-constant` k \[N·m/A\] (N/A for a linear axis), checked positive.
+    pub torque_constant: Option<f64>,
+    /// Which of R and k are given.
+    pub known: KnownConstants,
+    /// The start of the output-error fit, if given.
+    pub start: Option<MotorParams>,
+    /// Folder for the figures, if asked for.
+    pub plot: Option<PathBuf>,
+    /// No progress messages or warnings on standard error.
+    pub quiet: bool,
+    /// One JSON object instead of tables.
+    pub json: bool,
+    /// Header names of the record columns.
+    pub columns: ColumnMap,
+    /// Rotary or linear axis.
+    pub axis: Axis,
+    /// Cut-off of the zero-phase position filter for `--input current` \[Hz\].
+    pub cutoff_hz: f64,
+    /// Decimation factor for `--input current` (1: none).
+    pub decimation: usize,
+    /// How each record's simulation starts; `None`: told from its first samples.
+    pub initial_state: Option<fit::InitialState>,
+}
+
+impl Settings {
+    /// The options of `a`, each checked once, before any record is read: which records,
+    /// `--resistance` and `--torque-constant` (positive, and only where they apply),
+    /// `--decimation` ≥ 1, `--columns`, `--start`.
+    pub fn from_args(a: &IdentifyArgs) -> Result<Settings> {
+        if a.resistance.is_some()
+            && a.steady.is_empty()
+            && (a.record.is_empty() || a.input == DriveArg::Current)
+        {
+            return Err(BadInput(
+                "--resistance is for --steady, or with --torque-constant for --record files of voltage and speed only".into(),
+            )
+            .into());
+        }
+        let drive = match a.input {
+            DriveArg::Voltage => Drive::Voltage,
+            DriveArg::Current => Drive::Current,
+        };
+        if drive == Drive::Current {
+            if a.record.is_empty() {
+                return Err(BadInput(
+                    "--input current needs --record FILE.csv (current and position of the axis; repeatable: records of one axis are pooled)".into(),
+                )
+                .into());
+            }
+            if a.decimation == 0 {
+                return Err(BadInput(
+                    "--decimation 0: expected a factor of 1 (none) or more".into(),
+                )
+                .into());
+            }
+        }
+        let source = if drive == Drive::Current {
+            Source::Records(a.record.clone())
+        } else if !a.steady.is_empty() {
+            let (Some(resistance_ohm), Some(torque_constant)) = (a.resistance, a.torque_constant)
+            else {
+                return Err(BadInput("--steady needs --resistance OHM and --torque-constant NM_PER_A: Sec. 2.2 assumes R and k known".into()).into());
+            };
+            Source::Steady {
+                paths: a.steady.clone(),
+                resistance_ohm,
+                torque_constant,
+            }
+        } else if !a.record.is_empty() {
+            Source::Records(a.record.clone())
+        } else if let Some(dir) = &a.batch {
+            Source::Batch(dir.clone())
+        } else if let (Some(high), Some(low)) = (&a.high, &a.low) {
+            Source::Pair {
+                high: high.clone(),
+                low: low.clone(),
+            }
+        } else {
+            return Err(BadInput(
+                "give --high HV.csv --low LV.csv (step records), or --steady FILE.csv ...".into(),
+            )
+            .into());
+        };
+        let columns = match &a.columns {
+            Some(text) => ColumnMap::parse(text)?,
+            None => ColumnMap::default(),
+        };
+        // The steady fit checks its own R and k (Eq. (9)).
+        let known = if matches!(source, Source::Steady { .. }) {
+            KnownConstants::default()
+        } else {
+            kinds::known_constants(a.resistance, a.torque_constant)?
+        };
+        Ok(Settings {
+            source,
+            drive,
+            method: settings::step_method(a.method),
+            resistance: a.resistance,
+            torque_constant: a.torque_constant,
+            known,
+            start: a.start.as_deref().map(settings::motor).transpose()?,
+            plot: a.plot.clone(),
+            quiet: a.quiet,
+            json: a.json,
+            columns,
+            axis: match a.axis {
+                AxisArg::Rotary => Axis::Rotary,
+                AxisArg::Linear => Axis::Linear,
+            },
+            cutoff_hz: a.cutoff,
+            decimation: a.decimation,
+            initial_state: settings::initial_state(a.initial_state),
+        })
+    }
+}
 
 /// `x` with 7 significant digits, in plain or scientific notation as suits its size.
 fn sig(x: f64) -> String {
@@ -73,7 +237,7 @@ fn paper_json(paper: &PaperIdentification) -> Value {
         "eq48_Ts": paper.low.ts_nm,
         "eq50_KE": paper.low.k_e,
         "eq51_Ks": paper.low.k_s,
-        "steady_values": {"Irm": paper.steady_values[0], "Wrm": paper.steady_values[1], "Irb": paper.steady_values[2]},
+        "steady_values": {"Irm": paper.steady_values.i_rm_a, "Wrm": paper.steady_values.omega_rm_rad_s, "Irb": paper.steady_values.i_rb_a},
         "c8_speed_check": match &paper.speed_check {
             Ok(c) => json!({"wn": c.omega_n, "zeta": c.zeta, "rms": c.rms, "termination": c.termination.text(),
                             "wn_from_current": h.omega_n, "zeta_from_current": h.zeta}),
@@ -222,13 +386,12 @@ fn print_table(
     }
 }
 
-fn run_steady(a: &IdentifyArgs) -> Result<()> {
-    let (Some(r), Some(k)) = (a.resistance, a.torque_constant) else {
-        return Err(BadInput("--steady needs --resistance OHM and --torque-constant NM_PER_A: Sec. 2.2 assumes R and k known".into()).into());
-    };
+/// `--steady`: the apparent-resistance law (8) over the steady records at `paths`, and Ts by
+/// Eq. (9) from the known R = `r` \[Ω\] and k = `k` \[N·m/A\].
+fn run_steady(a: &Settings, paths: &[PathBuf], r: f64, k: f64) -> Result<()> {
     let mut tests = Vec::new();
-    for path in &a.steady {
-        let loaded = read_loaded(path, &column_map(a)?, true)?;
+    for path in paths {
+        let loaded = read_loaded(path, &a.columns, true)?;
         let cols = &loaded.record;
         let dt = motor_model::mean_period(&cols.t);
         // The current alone can look steady at its peak: check the speed too where it is
@@ -263,7 +426,7 @@ fn run_steady(a: &IdentifyArgs) -> Result<()> {
             "apparent resistance, Eq. (8): dR = a - b/Ir over {} tests",
             tests.len()
         );
-        for ((path, (e, ir)), (_, dr)) in a.steady.iter().zip(&tests).zip(&fit.points) {
+        for ((path, (e, ir)), (_, dr)) in paths.iter().zip(&tests).zip(&fit.points) {
             println!(
                 "  {}: E = {e:.6} V, Ir = {ir:.6} A, dR = {dr:.6} ohm",
                 path.display()
@@ -311,35 +474,23 @@ fn run_steady(a: &IdentifyArgs) -> Result<()> {
 
 /// `--input current`: J, f, Ts and the offset of a current-driven axis by inverse-model least
 /// squares (the EMPS benchmark's IDIM-LS).
-fn run_current(a: &IdentifyArgs) -> Result<()> {
-    if a.record.is_empty() {
-        return Err(BadInput(
-            "--input current needs --record FILE.csv (current and position of the axis; repeatable: records of one axis are pooled)".into(),
-        )
-        .into());
-    }
-    if a.decimation == 0 {
-        return Err(
-            BadInput("--decimation 0: expected a factor of 1 (none) or more".into()).into(),
-        );
-    }
-    let map = column_map(a)?;
-    let recs: Vec<motor_model::Record> = a
-        .record
+fn run_current(a: &Settings, paths: &[PathBuf]) -> Result<()> {
+    let recs: Vec<motor_model::Record> = paths
         .iter()
-        .map(|p| crate::steps::load_axis_record(p, &map, a.cutoff))
+        .map(|p| crate::steps::load_axis_record(p, &a.columns, a.cutoff_hz))
         .collect::<Result<_>>()?;
     let each: Vec<_> = recs.iter().map(|r| measured_channels(r, None)).collect();
     let kind = RecordKind::decide(
         common_channels(&each),
         Drive::Current,
         RecordSet::AnyWaveform,
-        kinds::known_constants(a)?,
+        a.known,
     )
-    .map_err(|why| kinds::refused(&shown_records(&a.record), why))?;
-    let path = &a.record[0];
-    let rec = &recs[0];
-    let shown = shown_records(&a.record);
+    .map_err(|why| kinds::refused(&shown_records(paths), why))?;
+    let (Some(path), Some(rec)) = (paths.first(), recs.first()) else {
+        return Err(BadInput("--input current needs --record FILE.csv".into()).into());
+    };
+    let shown = shown_records(paths);
     let position = rec.position.as_deref().unwrap_or_default();
     let dt = motor_model::mean_period(&rec.t);
     // The torque constant: given, or from the voltage equation (2a) of the first record when
@@ -360,7 +511,7 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
         exclude_current: None,
         exclude_speed: None,
     });
-    let (k, k_source) = torque_constant(a.torque_constant, excited.as_ref(), a.cutoff * dt)
+    let (k, k_source) = torque_constant(a.torque_constant, excited.as_ref(), a.cutoff_hz * dt)
         .map_err(|e| match e {
             TorqueConstantError::NotPositive(k) => {
                 BadInput(format!("--torque-constant {k}: expected a positive number"))
@@ -375,7 +526,7 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
     let torques = crate::steps::axis_torques(&recs, k);
     let axis_records = crate::steps::axis_records(&recs, &torques);
     let settings = InverseModelSettings {
-        position_cutoff_hz: a.cutoff,
+        position_cutoff_hz: a.cutoff_hz,
         position_filter_order: 4,
         decimation: a.decimation,
         fit_offset: true,
@@ -397,8 +548,8 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
         _ => Some("the offset is fixed at 0"),
     };
     let units = match a.axis {
-        AxisArg::Rotary => fit::MECHANICAL_UNITS_ROTARY,
-        AxisArg::Linear => fit::MECHANICAL_UNITS_LINEAR,
+        Axis::Rotary => fit::MECHANICAL_UNITS_ROTARY,
+        Axis::Linear => fit::MECHANICAL_UNITS_LINEAR,
     };
     if let Some(dir) = &a.plot {
         std::fs::create_dir_all(dir)
@@ -409,8 +560,8 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
         let t: Vec<f64> = f.t_s.iter().map(|s| rec.t[0] + s).collect();
         let residual = crate::plot::residual(&f.measured, &f.model);
         let (torque_label, residual_label) = match a.axis {
-            AxisArg::Rotary => ("torque k·I [N·m]", "torque residual [N·m]"),
-            AxisArg::Linear => ("force k·I [N]", "force residual [N]"),
+            Axis::Rotary => ("torque k·I [N·m]", "torque residual [N·m]"),
+            Axis::Linear => ("force k·I [N]", "force residual [N]"),
         };
         let name = path
             .file_stem()
@@ -481,8 +632,8 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
                     "matrix": (0..c.nrows()).map(|i| (0..c.ncols()).map(|j| c[(i, j)]).collect::<Vec<f64>>()).collect::<Vec<_>>(),
                 })),
             },
-            "settings": {"cutoff_hz": a.cutoff, "decimation": a.decimation, "torque_constant": k, "torque_constant_source": k_source},
-            "records": a.record.len(),
+            "settings": {"cutoff_hz": a.cutoff_hz, "decimation": a.decimation, "torque_constant": k, "torque_constant_source": k_source},
+            "records": paths.len(),
             "offset_fitted": fit.offset_status == OffsetStatus::Fitted,
             "offset_note": offset_note,
         });
@@ -516,35 +667,21 @@ fn run_current(a: &IdentifyArgs) -> Result<()> {
     Ok(())
 }
 
-pub fn run(a: &IdentifyArgs) -> Result<()> {
-    if a.resistance.is_some()
-        && a.steady.is_empty()
-        && (a.record.is_empty() || a.input == DriveArg::Current)
-    {
-        return Err(BadInput(
-            "--resistance is for --steady, or with --torque-constant for --record files of voltage and speed only".into(),
-        )
-        .into());
-    }
-    if a.input == DriveArg::Current {
-        return run_current(a);
-    }
-    if !a.steady.is_empty() {
-        return run_steady(a);
-    }
-    if !a.record.is_empty() {
-        return run_records(a);
-    }
-    if let Some(dir) = &a.batch {
-        return batch::run(a, dir);
-    }
-    let (Some(high), Some(low)) = (&a.high, &a.low) else {
-        return Err(BadInput(
-            "give --high HV.csv --low LV.csv (step records), or --steady FILE.csv ...".into(),
-        )
-        .into());
+/// Identifies the motor (or axis) from the records the settings name and prints the result;
+/// exit 3 when a fit did not converge or is refused.
+pub fn run(a: &Settings) -> Result<()> {
+    let (high, low) = match &a.source {
+        Source::Records(paths) if a.drive == Drive::Current => return run_current(a, paths),
+        Source::Steady {
+            paths,
+            resistance_ohm,
+            torque_constant,
+        } => return run_steady(a, paths, *resistance_ohm, *torque_constant),
+        Source::Records(paths) => return run_output_error(a, paths, None),
+        Source::Batch(dir) => return batch::run(a, dir),
+        Source::Pair { high, low } => (high, low),
     };
-    let map = column_map(a)?;
+    let map = &a.columns;
     let clock = std::time::Instant::now();
     let bytes: u64 = [high, low]
         .iter()
@@ -561,7 +698,7 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
             bytes as f64 / 1e6
         );
     }
-    let (hv, lv) = load_step_pair(high, low, &map, a.quiet)?;
+    let (hv, lv) = load_step_pair(high, low, map, a.quiet)?;
     let kind = RecordKind::decide(
         common_channels(&[hv.channels, lv.channels]),
         Drive::Voltage,
@@ -598,7 +735,7 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
             hv.current.len() + lv.current.len()
         );
     }
-    let result = identify_pair(&hv, &lv, settings::step_method(a.method))?;
+    let result = identify_pair(&hv, &lv, a.method)?;
     if long {
         eprintln!("done in {:.1} s", clock.elapsed().as_secs_f64());
     }
@@ -631,8 +768,8 @@ pub fn run(a: &IdentifyArgs) -> Result<()> {
 /// Why a step pair cannot be fitted by the step methods, which start every step from rest:
 /// `--initial-state steady|free`, or a record whose first samples show a running motor (unless
 /// `--initial-state rest`); `None` for a pair from rest.
-fn not_from_rest(a: &IdentifyArgs, steps: [&crate::steps::LoadedStep; 2]) -> Option<String> {
-    match settings::initial_state(a.initial_state) {
+fn not_from_rest(a: &Settings, steps: [&crate::steps::LoadedStep; 2]) -> Option<String> {
+    match a.initial_state {
         Some(fit::InitialState::Rest) => None,
         Some(state) => Some(format!("--initial-state {}", state.name())),
         None => {
@@ -649,25 +786,17 @@ fn not_from_rest(a: &IdentifyArgs, steps: [&crate::steps::LoadedStep; 2]) -> Opt
     }
 }
 
-/// `--record A.csv --record B.csv ...`: all six parameters by output error, or kS, kV, kA
-/// (and J, f, Ts with R and k given) from records without a usable current.
-fn run_records(a: &IdentifyArgs) -> Result<()> {
-    run_output_error(a, &a.record, None)
-}
-
-/// All six parameters by output error on the records at `paths`, each started from the state
-/// `--initial-state` gives or its first samples show; `note` says why a step pair came here.
-fn run_output_error(
-    a: &IdentifyArgs,
-    paths: &[std::path::PathBuf],
-    note: Option<&str>,
-) -> Result<()> {
-    let map = column_map(a)?;
-    let known = kinds::known_constants(a)?;
+/// `--record A.csv --record B.csv ...` (or a step pair that does not start at rest): all six
+/// parameters by output error on the records at `paths`, each started from the state
+/// `--initial-state` gives or its first samples show, or kS, kV, kA (and J, f, Ts with R and k
+/// given) from records without a usable current; `note` says why a step pair came here.
+fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Result<()> {
+    let map = &a.columns;
+    let known = a.known;
     let mut channels = Vec::new();
     let mut read = Vec::new();
     for path in paths {
-        let loaded = read_loaded_current_optional(path, &map)?;
+        let loaded = read_loaded_current_optional(path, map)?;
         let c = measured_channels(&loaded.record, loaded.current_lsb);
         let header = loaded.lines.first().map_or(1, |l| l.saturating_sub(1));
         // Each record on its own first, so that a refusal names its file.
@@ -707,7 +836,7 @@ fn run_output_error(
         ))
         .into());
     }
-    let given = a.start.as_deref().map(settings::motor).transpose()?;
+    let given = a.start;
     let samples: usize = loaded.iter().map(|l| l.record.t.len()).sum();
     let clock = std::time::Instant::now();
     // About a second of fitting on this kind of machine: progress from there on.
@@ -720,7 +849,7 @@ fn run_output_error(
     }
     let fitted = fit_excited_from(
         &loaded,
-        settings::initial_state(a.initial_state),
+        a.initial_state,
         given,
         &all,
         " (give a start with --start FILE.json)",
@@ -810,20 +939,12 @@ fn run_output_error(
 }
 
 /// The files of `paths`, comma-separated, for errors about all of them.
-fn shown_records(paths: &[std::path::PathBuf]) -> String {
+fn shown_records(paths: &[PathBuf]) -> String {
     paths
         .iter()
         .map(|p| p.display().to_string())
         .collect::<Vec<_>>()
         .join(", ")
-}
-
-/// The `--columns` mapping, if given.
-fn column_map(a: &IdentifyArgs) -> Result<ColumnMap> {
-    match &a.columns {
-        Some(text) => ColumnMap::parse(text),
-        None => Ok(ColumnMap::default()),
-    }
 }
 
 /// Exit status of a full fit: [`NotConverged`] with the reason when the solver gave up or the
