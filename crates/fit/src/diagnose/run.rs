@@ -863,15 +863,21 @@ pub fn diagnose(
     };
 
     progress(DiagnoseProgress::Nominal);
-    let nominal = fit_output_error(
-        &train,
-        &[],
-        &[],
-        start,
-        &Effects::none(),
-        settings.lm,
-        settings.step_factor,
-    )?;
+    let fit_nominal = |records: &[ExcitedRecord<'_>], from: &MotorParams| {
+        fit_output_error(
+            records,
+            &[],
+            &[],
+            from,
+            &Effects::none(),
+            settings.lm,
+            settings.step_factor,
+        )
+    };
+    let predict_nominal = |records: &[ExcitedRecord<'_>], motor: &MotorParams| {
+        predict_with_step_factor(records, motor, &Effects::none(), settings.step_factor)
+    };
+    let nominal = fit_nominal(&train, start)?;
     // A channel the nominal model explains worse than its mean is what an unmodelled effect
     // can do: diagnosed, and said (`nominal_note`). Any other failure stops here.
     let nominal_note = match (&nominal.refusal, nominal.failure()) {
@@ -883,12 +889,7 @@ pub fn diagnose(
         }
         (_, Some(why)) => return Err(DiagnoseError::NominalFailed(why)),
     };
-    let nominal_all = predict_with_step_factor(
-        &all,
-        &nominal.params,
-        &Effects::none(),
-        settings.step_factor,
-    )?;
+    let nominal_all = predict_nominal(&all, &nominal.params)?;
     // Each voltage jump moved to where, within its sample period, the nominal model puts it
     // (the voltage column says only between which two samples it fell), then the nominal
     // model refitted on those instants: from here on every fit and test uses them.
@@ -901,15 +902,7 @@ pub fn diagnose(
     let train: Vec<ExcitedRecord<'_>> = with_inputs(&train, &located);
     let all: Vec<ExcitedRecord<'_>> = with_inputs(&all, &located);
     let nominal = if located.iter().any(Option::is_some) {
-        let refit = fit_output_error(
-            &train,
-            &[],
-            &[],
-            &nominal.params,
-            &Effects::none(),
-            settings.lm,
-            settings.step_factor,
-        )?;
+        let refit = fit_nominal(&train, &nominal.params)?;
         // The refit on the located instants replaces the first only when it is a result too.
         match (refit.failure(), refit.termination.converged()) {
             (None, _) => refit,
@@ -919,12 +912,7 @@ pub fn diagnose(
     } else {
         nominal
     };
-    let nominal_all = predict_with_step_factor(
-        &all,
-        &nominal.params,
-        &Effects::none(),
-        settings.step_factor,
-    )?;
+    let nominal_all = predict_nominal(&all, &nominal.params)?;
     // The noise level of each channel, as the nominal fit weighted it: the same for every
     // candidate, so that their held-out errors compare.
     let sigmas = channel_scales(&nominal, &nominal_all);
