@@ -27,6 +27,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Some(index) = args.next().map(|s| s.parse::<usize>()).transpose()? {
         let case = benchmark_case(seed, index, n)?;
         println!("case {index}: truth {:?}", case.truth());
+        if std::env::var_os("WITHHELD_VERBOSE").is_some() {
+            println!("{}", serde_json::to_string(&case)?);
+        }
         let d = diagnose_case(&case, &settings)?;
         records::print_stages(&d);
         return Ok(());

@@ -10,6 +10,13 @@
 //! few parameters cannot learn the noise of the blocks it does not see, so a fall of the
 //! held-out error is evidence; a fall on the training blocks alone is not (SPEC section 7).
 //!
+//! **Voltage jumps.** The voltage column says only between which two samples a jump fell.
+//! After the nominal fit each jump is moved to the instant within that sample period where the
+//! nominal model fits its record best, the nominal model is refitted there, and the screening
+//! projects the jumps' instants out with the motor's parameters: otherwise a step modelled up
+//! to a period late leaves a residual at every jump that an effect acting there (a sensor lag,
+//! a saturating inductance) is credited with.
+//!
 //! **Candidates** start from the nominal motor and a small size of each effect, its shape
 //! parameters from the records (the cogging period count from the residual's ripple per
 //! revolution, time constants from the record span and sample period, speeds and currents from
@@ -23,8 +30,9 @@
 
 use motor_model::{
     BrushDrop, CoggingTorque, CurrentSensorLag, Effect, EffectKind, Effects, InductanceSaturation,
-    MotorParams, QuadraticDrag, StribeckFriction, ThermalDrift, COPPER_ALPHA_PER_K,
+    Input, MotorParams, QuadraticDrag, StribeckFriction, ThermalDrift, COPPER_ALPHA_PER_K,
 };
+use nalgebra::DMatrix;
 use serde::Serialize;
 
 use crate::diagnose::localise::{
@@ -55,7 +63,8 @@ pub struct DiagnoseSettings {
     pub verdict: VerdictSettings,
     /// The localisation's settings.
     pub localise: LocaliseSettings,
-    /// The solver's settings for every fit.
+    /// The solver's settings for every fit (default: the solver's, converged at a relative
+    /// cost fall of 1e-8 and stopped after 60 iterations).
     pub lm: LmSettings,
     /// Candidates refitted at the same time (default: the machine's parallelism).
     pub threads: usize,
@@ -83,7 +92,13 @@ impl Default for DiagnoseSettings {
             holdout_every: 4,
             verdict: VerdictSettings::default(),
             localise: LocaliseSettings::default(),
-            lm: LmSettings::default(),
+            lm: LmSettings {
+                ftol: DIAGNOSIS_FTOL,
+                xtol: DIAGNOSIS_FTOL,
+                max_iters: DIAGNOSIS_MAX_ITERS,
+                max_evaluations: 5 * DIAGNOSIS_MAX_ITERS,
+                ..LmSettings::default()
+            },
             threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
             refits: 2,
             step_factor: 8.0,
@@ -91,6 +106,16 @@ impl Default for DiagnoseSettings {
         }
     }
 }
+
+/// Relative fall of the cost (and relative step) at which every fit of a diagnosis has
+/// converged. Its tests resolve a tenth of a noise variance; a fit of `n` weighted residuals
+/// has a cost of about `n/2`, so 1e-8 of it is below 1e-3 noise variances for records of up to
+/// 10⁵ samples, and the solver's own 1e-10 only buys iterations that change no verdict.
+const DIAGNOSIS_FTOL: f64 = 1e-8;
+/// Iterations of every fit of a diagnosis at most: refits start from the model of the stage
+/// they extend, and one that has not converged in this many is not going to be named (it is
+/// reported unresolved). Bounds the time of a case.
+const DIAGNOSIS_MAX_ITERS: u64 = 60;
 
 /// Where a diagnosis stands, for progress reports.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -422,6 +447,263 @@ fn train_statistic(
     (count > 0).then(|| fall / (factor_sum / count as f64))
 }
 
+/// Golden-section rounds of the search for one voltage jump's instant (the bracket, one sample
+/// period, shrinks to 0.618¹² ≈ 0.3 % of it).
+const JUMP_SEARCH_ROUNDS: usize = 12;
+
+/// Record `k`'s piecewise-constant voltage with every jump moved, one after the other, to the
+/// instant within the sample period before its first sample at which `motor` fits the record
+/// best (weighted squared error of its channels, `sigmas` as in [`channel_scales`]), by a
+/// golden-section search of [`JUMP_SEARCH_ROUNDS`] rounds per jump. A logger's clock is not
+/// tied to the step: the voltage column tells only between which two samples a jump fell, and
+/// a model whose step comes up to a period late leaves a residual at every jump that an effect
+/// acting there (a sensor lag, a saturating inductance) would be named for. `None` when the
+/// voltage is not piecewise constant or nothing could be simulated.
+fn locate_jumps(
+    k: usize,
+    record: &ExcitedRecord<'_>,
+    motor: &MotorParams,
+    sigmas: &[(usize, Channel, f64)],
+    step_factor: f64,
+) -> Option<Input> {
+    let mut levels: Vec<(f64, f64)> = match record.input {
+        Input::Piecewise { times_s, volts } => {
+            times_s.iter().copied().zip(volts.iter().copied()).collect()
+        }
+        Input::Step { volts, at_s } => vec![(*at_s, *volts)],
+        _ => return None,
+    };
+    let dt = record.dt;
+    let cost = |levels: &[(f64, f64)]| -> Option<f64> {
+        let input = Input::piecewise(levels).ok()?;
+        let r = ExcitedRecord {
+            input: &input,
+            ..*record
+        };
+        let fitted = predict_with_step_factor(&[r], motor, &Effects::none(), step_factor).ok()?;
+        let mut sse = 0.0;
+        for ch in &fitted {
+            let sigma = sigmas
+                .iter()
+                .find(|(r, c, _)| *r == k && *c == ch.channel)
+                .map_or(1.0, |s| s.2);
+            sse += ch
+                .measured
+                .iter()
+                .zip(&ch.model)
+                .map(|(y, m)| ((y - m) / sigma).powi(2))
+                .sum::<f64>();
+        }
+        sse.is_finite().then_some(sse)
+    };
+    let golden = (5f64.sqrt() - 1.0) / 2.0;
+    let mut any = false;
+    for j in 0..levels.len() {
+        let t = levels[j].0;
+        // Only a jump after the record's first sample has a sample period to move in.
+        if t < 0.5 * dt {
+            continue;
+        }
+        let lo_limit = levels.get(j.wrapping_sub(1)).map_or(0.0, |l| l.0);
+        let (mut a, mut b) = ((t - dt).max(lo_limit + 0.5 * dt), t);
+        if b - a <= 0.0 {
+            continue;
+        }
+        let at = |x: f64| -> f64 {
+            let mut trial = levels.clone();
+            trial[j].0 = x;
+            cost(&trial).unwrap_or(f64::INFINITY)
+        };
+        let (mut c, mut d) = (b - golden * (b - a), a + golden * (b - a));
+        let (mut fc, mut fd) = (at(c), at(d));
+        let f_end = at(b);
+        if !(fc.is_finite() || fd.is_finite() || f_end.is_finite()) {
+            return None;
+        }
+        for _ in 0..JUMP_SEARCH_ROUNDS {
+            if fc < fd {
+                b = d;
+                d = c;
+                fd = fc;
+                c = b - golden * (b - a);
+                fc = at(c);
+            } else {
+                a = c;
+                c = d;
+                fc = fd;
+                d = a + golden * (b - a);
+                fd = at(d);
+            }
+        }
+        let (best, f_best) = if fc < fd { (c, fc) } else { (d, fd) };
+        if f_best < f_end {
+            levels[j].0 = best;
+            any = true;
+        }
+    }
+    any.then(|| Input::piecewise(&levels).ok()).flatten()
+}
+
+/// Shift of a voltage jump's instant for its sensitivity column \[sample periods\].
+const JUMP_DIFF_STEP: f64 = 0.05;
+
+/// Record `k`'s weighted residuals `(simulated − measured)/σ` for `motor` with `effects` on
+/// `input`, at the samples its masks keep, channel after channel: the rows
+/// [`output_error_sensitivity`] gives it.
+fn record_rows(
+    k: usize,
+    record: &ExcitedRecord<'_>,
+    input: &Input,
+    base: &Base<'_>,
+    sigmas: &[(usize, Channel, f64)],
+    step_factor: f64,
+) -> Option<Vec<f64>> {
+    let r = ExcitedRecord { input, ..*record };
+    let fitted = predict_with_step_factor(&[r], &base.motor, &base.effects, step_factor).ok()?;
+    let mut rows = Vec::new();
+    for ch in &fitted {
+        let sigma = sigmas
+            .iter()
+            .find(|(r, c, _)| *r == k && *c == ch.channel)
+            .map(|s| s.2)?;
+        let mask = match ch.channel {
+            Channel::Current => record.exclude_current,
+            Channel::Speed | Channel::EncoderSpeed => record.exclude_speed,
+        };
+        for (j, &i) in ch.samples.iter().enumerate() {
+            if !mask.is_some_and(|m| m.get(i).copied().unwrap_or(false)) {
+                rows.push((ch.model[j] - ch.measured[j]) / sigma);
+            }
+        }
+    }
+    Some(rows)
+}
+
+/// The base Jacobian `jacobian` (rows of `residuals`, the training records of `base`) with a
+/// column for the instant of every voltage jump of a training record. The voltage column
+/// tells only between which two samples a jump fell; where the records' samples are coarse
+/// beside the electrical time constant, that instant, L and anything acting at the jumps (a
+/// sensor lag, a saturating inductance) change the same few samples, and the screening must
+/// not credit an effect with what a jump half a period earlier explains
+/// ([`crate::diagnose::screen`] projects these columns out with the motor's). Unchanged when
+/// the rows cannot be rebuilt exactly.
+fn with_jump_columns(
+    jacobian: DMatrix<f64>,
+    residuals: &[f64],
+    base: &Base<'_>,
+    sigmas: &[(usize, Channel, f64)],
+    step_factor: f64,
+) -> DMatrix<f64> {
+    let mut rows: Vec<Vec<f64>> = Vec::with_capacity(base.train.len());
+    for (k, r) in base.train.iter().enumerate() {
+        match record_rows(k, r, r.input, base, sigmas, step_factor) {
+            Some(v) => rows.push(v),
+            None => return jacobian,
+        }
+    }
+    let flat: Vec<f64> = rows.iter().flatten().copied().collect();
+    let same = flat.len() == residuals.len()
+        && flat
+            .iter()
+            .zip(residuals)
+            .all(|(a, b)| (a - b).abs() <= 1e-6 * (1.0 + b.abs()));
+    if !same {
+        return jacobian;
+    }
+    let mut columns: Vec<Vec<f64>> = Vec::new();
+    let mut offset = 0;
+    for (k, r) in base.train.iter().enumerate() {
+        let levels: Vec<(f64, f64)> = match r.input {
+            Input::Piecewise { times_s, volts } => {
+                times_s.iter().copied().zip(volts.iter().copied()).collect()
+            }
+            Input::Step { volts, at_s } => vec![(*at_s, *volts)],
+            _ => Vec::new(),
+        };
+        let h = JUMP_DIFF_STEP * r.dt;
+        for j in 0..levels.len() {
+            if levels[j].0 < 0.5 * r.dt {
+                continue;
+            }
+            let mut shifted = levels.clone();
+            shifted[j].0 -= h;
+            let Some(moved) = Input::piecewise(&shifted)
+                .ok()
+                .and_then(|input| record_rows(k, r, &input, base, sigmas, step_factor))
+            else {
+                continue;
+            };
+            if moved.len() != rows[k].len() {
+                continue;
+            }
+            let mut col = vec![0.0; residuals.len()];
+            for (i, (a, b)) in moved.iter().zip(&rows[k]).enumerate() {
+                col[offset + i] = (a - b) / h;
+            }
+            columns.push(col);
+        }
+        offset += rows[k].len();
+    }
+    if columns.is_empty() {
+        return jacobian;
+    }
+    let p = jacobian.ncols();
+    let mut out = jacobian.resize_horizontally(p + columns.len(), 0.0);
+    for (c, col) in columns.iter().enumerate() {
+        out.column_mut(p + c).copy_from_slice(col);
+    }
+    out
+}
+
+/// `records` with record `k`'s input replaced by `inputs[k]` where that is given.
+fn with_inputs<'a>(
+    records: &[ExcitedRecord<'a>],
+    inputs: &'a [Option<Input>],
+) -> Vec<ExcitedRecord<'a>> {
+    records
+        .iter()
+        .enumerate()
+        .map(|(k, r)| match inputs.get(k).and_then(Option::as_ref) {
+            Some(input) => ExcitedRecord { input, ..*r },
+            None => *r,
+        })
+        .collect()
+}
+
+/// The scale each channel's residual is measured in: for a training record's channel the
+/// level the nominal fit weighted it by (its residual RMS there); for a validation record's
+/// channel, which no fit weighted, the nominal model's residual RMS on it. Without the second,
+/// a validation channel would count in its own unit (A², (rad/s)²), its held-out errors would
+/// not compare with the training ones nor with the parameter penalty, and a speed channel
+/// would outweigh every current channel.
+fn channel_scales(nominal: &FullFit, fitted: &[FittedChannel]) -> Vec<(usize, Channel, f64)> {
+    let mut sigmas: Vec<(usize, Channel, f64)> = nominal
+        .quality
+        .iter()
+        .map(|q| (q.test, q.channel, q.noise_std))
+        .collect();
+    for ch in fitted {
+        if sigmas
+            .iter()
+            .any(|(r, c, _)| *r == ch.record && *c == ch.channel)
+        {
+            continue;
+        }
+        let n = ch.measured.len().min(ch.model.len());
+        let sse: f64 = ch
+            .measured
+            .iter()
+            .zip(&ch.model)
+            .map(|(y, m)| (y - m).powi(2))
+            .sum();
+        let rms = (sse / n.max(1) as f64).sqrt();
+        if rms.is_finite() && rms > 0.0 {
+            sigmas.push((ch.record, ch.channel, rms));
+        }
+    }
+    sigmas
+}
+
 /// A small starting size of `kind` on `motor`, its shape from the records.
 fn candidate_start(
     kind: EffectKind,
@@ -499,6 +781,23 @@ fn candidate_start(
     }
 }
 
+/// Whether a refit of `kind` converged and is refused only because the records do not
+/// determine every parameter of the effect (no intervals, or an effect parameter's too wide):
+/// a thermal drift whose time constant is far longer than the records, say, whose heating rate
+/// they still show. Such a refit is judged like any other by its held-out improvement (the
+/// effect is there or not whatever its undetermined parameter); its report keeps the intervals
+/// it has, and its assessment says it is unresolved unless that improvement is significant.
+fn only_undetermined(fit: &FullFit, kind: EffectKind) -> bool {
+    fit.termination.converged()
+        && match &fit.refusal {
+            Some(crate::Refusal::NoIntervals) => true,
+            Some(crate::Refusal::Undetermined { parameter, .. }) => {
+                kind.params().iter().any(|p| p.symbol == *parameter)
+            }
+            _ => false,
+        }
+}
+
 /// Whether a refit determines the effect's size: every fitted parameter has an interval no
 /// wider than a hundred times its value.
 fn determined(estimates: &[EffectEstimate]) -> bool {
@@ -574,15 +873,21 @@ pub fn diagnose(
     };
 
     progress(DiagnoseProgress::Nominal);
-    let nominal = fit_output_error(
-        &train,
-        &[],
-        &[],
-        start,
-        &Effects::none(),
-        settings.lm,
-        settings.step_factor,
-    )?;
+    let fit_nominal = |records: &[ExcitedRecord<'_>], from: &MotorParams| {
+        fit_output_error(
+            records,
+            &[],
+            &[],
+            from,
+            &Effects::none(),
+            settings.lm,
+            settings.step_factor,
+        )
+    };
+    let predict_nominal = |records: &[ExcitedRecord<'_>], motor: &MotorParams| {
+        predict_with_step_factor(records, motor, &Effects::none(), settings.step_factor)
+    };
+    let nominal = fit_nominal(&train, start)?;
     // A channel the nominal model explains worse than its mean is what an unmodelled effect
     // can do: diagnosed, and said (`nominal_note`). Any other failure stops here.
     let nominal_note = match (&nominal.refusal, nominal.failure()) {
@@ -594,19 +899,33 @@ pub fn diagnose(
         }
         (_, Some(why)) => return Err(DiagnoseError::NominalFailed(why)),
     };
-    let nominal_all = predict_with_step_factor(
-        &all,
-        &nominal.params,
-        &Effects::none(),
-        settings.step_factor,
-    )?;
+    let nominal_all = predict_nominal(&all, &nominal.params)?;
+    // Each voltage jump moved to where, within its sample period, the nominal model puts it
+    // (the voltage column says only between which two samples it fell), then the nominal
+    // model refitted on those instants: from here on every fit and test uses them.
+    let sigmas = channel_scales(&nominal, &nominal_all);
+    let located: Vec<Option<Input>> = all
+        .iter()
+        .enumerate()
+        .map(|(k, r)| locate_jumps(k, r, &nominal.params, &sigmas, settings.step_factor))
+        .collect();
+    let train: Vec<ExcitedRecord<'_>> = with_inputs(&train, &located);
+    let all: Vec<ExcitedRecord<'_>> = with_inputs(&all, &located);
+    let nominal = if located.iter().any(Option::is_some) {
+        let refit = fit_nominal(&train, &nominal.params)?;
+        // The refit on the located instants replaces the first only when it is a result too.
+        match (refit.failure(), refit.termination.converged()) {
+            (None, _) => refit,
+            (Some(_), true) if nominal_note.is_some() => refit,
+            _ => nominal,
+        }
+    } else {
+        nominal
+    };
+    let nominal_all = predict_nominal(&all, &nominal.params)?;
     // The noise level of each channel, as the nominal fit weighted it: the same for every
     // candidate, so that their held-out errors compare.
-    let sigmas: Vec<(usize, Channel, f64)> = nominal
-        .quality
-        .iter()
-        .map(|q| (q.test, q.channel, q.noise_std))
-        .collect();
+    let sigmas = channel_scales(&nominal, &nominal_all);
     let localisation = localise_all(&all, &nominal_all, names, &settings.localise)?;
 
     let mut stages: Vec<Stage> = Vec::new();
@@ -739,7 +1058,11 @@ fn screen_stage(
     let projection =
         output_error_sensitivity(base.train, &base.motor, &base.effects, sigmas, None, factor)
             .ok()
-            .and_then(|lin| BaseProjection::new(&lin.residuals, &lin.jacobian, &lin.series));
+            .and_then(|lin| {
+                let jacobian =
+                    with_jump_columns(lin.jacobian.clone(), &lin.residuals, base, sigmas, factor);
+                BaseProjection::new(&lin.residuals, &jacobian, &lin.series)
+            });
     let Some(projection) = projection else {
         return vec![None; kinds.len()];
     };
@@ -855,6 +1178,7 @@ fn run_stage(
         )
         .map_err(|e| e.to_string())
         .and_then(|fit| match fit.failure() {
+            Some(_) if only_undetermined(&fit, kind) => Ok(fit),
             Some(why) => Err(why),
             None => Ok(fit),
         })
@@ -909,7 +1233,7 @@ fn run_stage(
                         motor: Some(fit.params),
                         ..unfitted(k, fit.effects, assessment, None)
                     },
-                    if determined(&own) { sse } else { Vec::new() },
+                    sse,
                     statistic,
                 )
             }

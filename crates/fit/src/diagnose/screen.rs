@@ -3,7 +3,9 @@
 //!
 //! At the base model's optimum the score (Lagrange-multiplier) test of an effect needs no fit
 //! of that effect: with `r` the base model's weighted training residuals (units of the noise),
-//! `J` their Jacobian in the base model's parameters and `S` the effect's *signatures* — the
+//! `J` their Jacobian in the base model's parameters (and in the instant of every voltage jump
+//! within its sample period, which the voltage column leaves unknown) and `S` the effect's
+//! *signatures* — the
 //! derivatives of the residuals in the effect's parameters at a small start size, by forward
 //! differences of the simulation — the statistic is
 //!

@@ -1,0 +1,56 @@
+//! A small, seeded version of the withheld-effect benchmark (issue 9, acceptance 1): cases of
+//! `motor_model::withheld` diagnosed without being told their effect, scored by
+//! `fit::diagnose::benchmark`, with a floor on the top-1 accuracy and no false alarm on `none`.
+//!
+//! The cases are a fixed subset of the 16 cases of seed 1 (two `none`, a sensor lag and a
+//! thermal drift in each of their two functional forms, a quadratic drag), the first seven
+//! whose diagnosis takes seconds, so that the test runs in CI; the full benchmark is the
+//! `withheld_benchmark` example. The diagnosis names the right effect on five of the seven (the
+//! sensor lag of case 0, a tenth of a sample period, and the two-node thermal drift of case 1
+//! are missed); the floor, 0.6, is met by that and failed by the diagnosis of commit 21462d2,
+//! before the voltage jumps' instants were located and projected out of the screening and
+//! refits with an undetermined effect parameter were judged (four of seven: it also missed the
+//! thermal drift of case 12).
+
+use fit::diagnose::benchmark::{run_case, CaseOutcome, Summary};
+use fit::diagnose::DiagnoseSettings;
+use motor_model::withheld::benchmark_case;
+
+/// Seed of the cases.
+const SEED: u64 = 1;
+/// Cases in the benchmark the subset is taken from.
+const OF: usize = 16;
+/// The subset (indices into the benchmark).
+const CASES: [usize; 7] = [0, 1, 2, 3, 5, 6, 12];
+/// Top-1 accuracy the diagnosis must reach on them \[-\].
+const TOP1_FLOOR: f64 = 0.6;
+
+#[test]
+fn withheld_effects_are_named_above_the_floor_and_none_raises_no_alarm() {
+    let settings = DiagnoseSettings {
+        threads: 2,
+        ..DiagnoseSettings::default()
+    };
+    let outcomes: Vec<CaseOutcome> = CASES
+        .iter()
+        .map(|&i| {
+            let case = benchmark_case(SEED, i, OF).expect("a case of the benchmark");
+            run_case(&case, &settings)
+        })
+        .collect();
+    let table: Vec<String> = outcomes
+        .iter()
+        .map(|o| format!("case {}: {:?} named {:?}", o.index, o.truth, o.named))
+        .collect();
+    let s = Summary::of(&outcomes);
+    assert!(
+        s.false_alarms.1 > 0,
+        "the subset must hold a `none` case: {table:#?}"
+    );
+    assert_eq!(s.false_alarms.0, 0, "false alarm on none: {table:#?}");
+    assert!(
+        s.top1_accuracy >= TOP1_FLOOR,
+        "top-1 accuracy {:.2} below {TOP1_FLOOR}: {table:#?}",
+        s.top1_accuracy
+    );
+}
