@@ -49,6 +49,8 @@ const CACHE_CAPACITY: usize = 64;
 const I: usize = 0;
 const W: usize = 1;
 const TH: usize = 2;
+/// Index of the constant 1 in `z`.
+const ONE: usize = 3;
 
 /// The mode of the rotor: stuck (0) or moving in direction ±1.
 type Direction = f64;
@@ -94,45 +96,17 @@ impl<'a> ExactPropagator<'a> {
             p.j_kgm2,
             p.ts_nm,
         );
-        if dir == 0.0 {
-            Matrix4::new(
-                -r / l,
-                0.0,
-                0.0,
-                volts / l,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-            )
-        } else {
-            Matrix4::new(
-                -r / l,
-                -k / l,
-                0.0,
-                volts / l,
-                k / j,
-                -f / j,
-                0.0,
-                -dir * ts / j,
-                0.0,
-                1.0,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-            )
+        let mut m = Matrix4::zeros();
+        m[(I, I)] = -r / l;
+        m[(I, ONE)] = volts / l;
+        if dir != 0.0 {
+            m[(I, W)] = -k / l;
+            m[(W, I)] = k / j;
+            m[(W, W)] = -f / j;
+            m[(W, ONE)] = -dir * ts / j;
+            m[(TH, W)] = 1.0;
         }
+        m
     }
 
     /// `exp(M h)`, `None` where `M h` is not finite or too large to exponentiate accurately.
@@ -342,15 +316,7 @@ impl<'a> ExactPropagator<'a> {
     /// current `i0` \[A\] and speed `w0` \[rad/s\]; `None` where a stretch cannot be
     /// propagated exactly (the caller integrates it instead).
     pub(crate) fn run(mut self, n: usize, dt: f64, (i0, w0): (f64, f64)) -> Option<Trace> {
-        let mut trace = Trace {
-            t: Vec::with_capacity(n),
-            voltage: Vec::with_capacity(n),
-            current: Vec::with_capacity(n),
-            armature_current: Vec::with_capacity(n),
-            speed: Vec::with_capacity(n),
-            position: Vec::with_capacity(n),
-            stuck: Vec::with_capacity(n),
-        };
+        let mut trace = Trace::with_capacity(n);
         let mut z = Vector4::new(i0, w0, 0.0, 1.0);
         let mut dir = if w0 == 0.0 {
             self.mode_at_rest(&z)

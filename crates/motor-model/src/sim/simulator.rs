@@ -81,6 +81,21 @@ pub struct Trace {
     pub stuck: Vec<bool>,
 }
 
+impl Trace {
+    /// An empty trace with room for `n` samples in every channel.
+    pub(crate) fn with_capacity(n: usize) -> Self {
+        Trace {
+            t: Vec::with_capacity(n),
+            voltage: Vec::with_capacity(n),
+            current: Vec::with_capacity(n),
+            armature_current: Vec::with_capacity(n),
+            speed: Vec::with_capacity(n),
+            position: Vec::with_capacity(n),
+            stuck: Vec::with_capacity(n),
+        }
+    }
+}
+
 /// An effect that is on, with the place of its own states in the state vector.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Active {
@@ -296,15 +311,7 @@ impl Simulator {
 
     /// [`Simulator::run`] on `n` samples every `dt` \[s\] with a state of `N` numbers.
     fn run_sized<const N: usize>(&self, n: usize, dt: f64) -> Trace {
-        let mut trace = Trace {
-            t: Vec::with_capacity(n),
-            voltage: Vec::with_capacity(n),
-            current: Vec::with_capacity(n),
-            armature_current: Vec::with_capacity(n),
-            speed: Vec::with_capacity(n),
-            position: Vec::with_capacity(n),
-            stuck: Vec::with_capacity(n),
-        };
+        let mut trace = Trace::with_capacity(n);
         let sensor = self.sensor.filter(|&s| s < N).unwrap_or(I_IDX);
         let mut x: State<N> = [0.0; N];
         let (i0, w0) = self.initial;
