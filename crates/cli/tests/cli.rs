@@ -351,7 +351,8 @@ fn long_simulations_report_progress_unless_quiet() {
         let mut args = vec!["simulate", "--motor", motor.to_str().unwrap()];
         // A sine, integrated by RK4 (a step of the nominal model is propagated exactly, in
         // no time): τe = 1 µs makes a second of it take seconds.
-        args.extend(["--sine", "40,0.5", "--solver", "ode", "--duration", duration]);
+        args.extend(["--sine", "40,0.5", "--solver", "ode"]);
+        args.extend(["--duration", duration]);
         args.extend(["-o", path.to_str().unwrap()]);
         if quiet {
             args.push("--quiet");
