@@ -43,6 +43,9 @@ const MAX_SCALED_NORM: f64 = 1e12;
 const HALF_PERIOD_SHARE: f64 = 0.9;
 /// Relative size below which a sign of the acceleration is taken as rounding.
 const ACCELERATION_TOLERANCE: f64 = 1e-9;
+/// Most pieces a moving stretch is cut into (an oscillation this much faster than the
+/// sampling is left to the integrator).
+const MAX_PIECES: f64 = 1e6;
 /// Propagators kept per run (levels × modes × stretch lengths).
 const CACHE_CAPACITY: usize = 64;
 
@@ -77,6 +80,9 @@ impl<'a> ExactPropagator<'a> {
         } else {
             f64::INFINITY
         };
+        if max_moving_s.is_nan() || max_moving_s <= 0.0 {
+            return None;
+        }
         Some(ExactPropagator {
             params,
             input,
@@ -241,6 +247,9 @@ impl<'a> ExactPropagator<'a> {
         repeated: bool,
     ) -> Option<Option<f64>> {
         let pieces = (h / self.max_moving_s).ceil().max(1.0);
+        if pieces > MAX_PIECES {
+            return None;
+        }
         let piece = h / pieces;
         let phi = if repeated {
             self.cached(volts, dir, piece)?
