@@ -378,7 +378,8 @@ pub struct ModelArgs {
 pub enum SolverArg {
     /// Exact closed-form step response (steps without effects only).
     Analytic,
-    /// Stick-slip RK4 simulation (any waveform, effects).
+    /// Stick-slip simulation (any waveform, effects): the nominal model under a step,
+    /// staircase or PRBS propagated exactly, anything else integrated by RK4.
     Ode,
 }
 

@@ -1,4 +1,5 @@
-//! Times the exact step response on a grid and the stick-slip ODE simulation.
+//! Times the exact step response on a grid and the stick-slip simulation (the nominal model
+//! propagated exactly and by RK4, and RK4 with cogging).
 //!
 //! `cargo bench -p motor-model --bench responses`
 
@@ -36,9 +37,16 @@ fn ode_simulation(c: &mut Criterion) {
     for seconds in [5.0, 50.0] {
         let sim = Simulator::new(motor, Effects::none(), Input::step(40.0, 0.0).unwrap()).unwrap();
         group.throughput(Throughput::Elements((seconds * 1000.0) as u64));
+        // Exact propagation (what `run` does for a nominal step) beside RK4 on the same model.
         group.bench_with_input(BenchmarkId::new("nominal", seconds), &seconds, |b, &s| {
             b.iter(|| sim.run(black_box(s), 1000.0).unwrap())
         });
+        let rk4 = sim.clone().integrated();
+        group.bench_with_input(
+            BenchmarkId::new("nominal_rk4", seconds),
+            &seconds,
+            |b, &s| b.iter(|| rk4.run(black_box(s), 1000.0).unwrap()),
+        );
     }
     let cogging: Effect = "cogging_torque:amp=0.01,n=6".parse().unwrap();
     let sim = Simulator::new(

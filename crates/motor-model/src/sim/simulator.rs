@@ -15,7 +15,9 @@
 //! Each effect's part (`L(I)`, `V(I)`, `R(x)`, `T_load`, `T_c`, its own states) is its own
 //! [`Dynamics`](super::dynamics) implementation.
 //!
-//! Integration is classical RK4 with a step of at most 1/40 of the fastest time constant (and,
+//! The nominal model under a step or piecewise-constant voltage is propagated exactly, each
+//! mode being linear between the voltage's jumps (the matrix exponential,
+//! switching instants located within the sample). Otherwise integration is classical RK4 with a step of at most 1/40 of the fastest time constant (and,
 //! with cogging, of a cogging period at the current speed — or at a speed bound given up front,
 //! [`Simulator::with_speed_bound`], so that the step does not depend on the state). The
 //! switching instants (breakaway, and each zero crossing of Ω, where the rotor sticks again or
@@ -26,6 +28,7 @@ use serde::Serialize;
 
 use super::dynamics::Dynamics;
 use super::effects::{Effect, Effects};
+use super::exact::ExactPropagator;
 use super::input::Input;
 use crate::derived::signed_damped_pulsation_sq;
 use crate::error::{positive, ModelError};
@@ -78,6 +81,21 @@ pub struct Trace {
     pub stuck: Vec<bool>,
 }
 
+impl Trace {
+    /// An empty trace with room for `n` samples in every channel.
+    pub(crate) fn with_capacity(n: usize) -> Self {
+        Trace {
+            t: Vec::with_capacity(n),
+            voltage: Vec::with_capacity(n),
+            current: Vec::with_capacity(n),
+            armature_current: Vec::with_capacity(n),
+            speed: Vec::with_capacity(n),
+            position: Vec::with_capacity(n),
+            stuck: Vec::with_capacity(n),
+        }
+    }
+}
+
 /// An effect that is on, with the place of its own states in the state vector.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Active {
@@ -114,6 +132,8 @@ pub struct Simulator {
     state_dependent_step: bool,
     /// Armature current \[A\] and speed \[rad/s\] at `t = 0` (rest by default).
     initial: (f64, f64),
+    /// Integrate by RK4 even where exact propagation applies ([`Simulator::integrated`]).
+    rk4_only: bool,
 }
 
 impl Simulator {
@@ -161,6 +181,7 @@ impl Simulator {
             max_step_s: f64::INFINITY,
             state_dependent_step: true,
             initial: (0.0, 0.0),
+            rk4_only: false,
         };
         sim.max_step_s = sim.fastest_time_constant() / STEPS_PER_TIME_CONSTANT;
         Ok(sim)
@@ -225,6 +246,14 @@ impl Simulator {
         Ok(self)
     }
 
+    /// The same simulator integrated by RK4 on its step settings even where [`Simulator::run`]
+    /// would propagate exactly (the nominal model under a step or piecewise-constant
+    /// voltage): to cross-check the two and to measure what exact propagation saves.
+    pub fn integrated(mut self) -> Self {
+        self.rk4_only = true;
+        self
+    }
+
     /// The same simulator started at `t = 0` with armature current `current_a` \[A\] and speed
     /// `speed_rad_s` \[rad/s\] instead of at rest (the angle starts at 0; a lagging current
     /// sensor reads `current_a`, a winding starts at ambient temperature). A rotor started
@@ -256,8 +285,20 @@ impl Simulator {
 
     /// Simulates `duration_s` \[s\] from rest (or the state of
     /// [`Simulator::with_initial_state`]), sampled at `rate_hz` \[Hz\] (`t = 0, 1/rate, …`).
+    ///
+    /// The nominal model under a step or piecewise-constant voltage is propagated exactly
+    /// (the matrix exponential of each mode): its step settings do not apply and
+    /// a sample costs the same whatever the ratio of the sample period to the time constants.
+    /// Every other model and input is integrated by RK4 (module docs).
     pub fn run(&self, duration_s: f64, rate_hz: f64) -> Result<Trace, ModelError> {
         let (n, dt) = sample_grid(duration_s, rate_hz)?;
+        if self.active.is_empty() && !self.rk4_only {
+            if let Some(trace) = ExactPropagator::new(&self.params, &self.input)
+                .and_then(|exact| exact.run(n, dt, self.initial))
+            {
+                return Ok(trace);
+            }
+        }
         Ok(match self.n_states {
             3 => self.run_sized::<3>(n, dt),
             4 => self.run_sized::<4>(n, dt),
@@ -270,15 +311,7 @@ impl Simulator {
 
     /// [`Simulator::run`] on `n` samples every `dt` \[s\] with a state of `N` numbers.
     fn run_sized<const N: usize>(&self, n: usize, dt: f64) -> Trace {
-        let mut trace = Trace {
-            t: Vec::with_capacity(n),
-            voltage: Vec::with_capacity(n),
-            current: Vec::with_capacity(n),
-            armature_current: Vec::with_capacity(n),
-            speed: Vec::with_capacity(n),
-            position: Vec::with_capacity(n),
-            stuck: Vec::with_capacity(n),
-        };
+        let mut trace = Trace::with_capacity(n);
         let sensor = self.sensor.filter(|&s| s < N).unwrap_or(I_IDX);
         let mut x: State<N> = [0.0; N];
         let (i0, w0) = self.initial;

@@ -163,15 +163,7 @@ impl Plant {
             });
         }
         let n = count as usize;
-        let mut out = Trace {
-            t: Vec::with_capacity(n),
-            voltage: Vec::with_capacity(n),
-            current: Vec::with_capacity(n),
-            armature_current: Vec::with_capacity(n),
-            speed: Vec::with_capacity(n),
-            position: Vec::with_capacity(n),
-            stuck: Vec::with_capacity(n),
-        };
+        let mut out = Trace::with_capacity(n);
         let mut x: State = [0.0; 8];
         let mut phase = if self
             .slots
