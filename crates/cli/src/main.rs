@@ -142,7 +142,9 @@ fn main() -> ExitCode {
                 commands::acquire::Settings::from_args(&a).and_then(|s| commands::acquire::run(&s))
             }
             Command::Emps(a) => commands::emps::run(&commands::emps::Settings::from_args(&a)),
-            Command::Diagnose(a) => commands::diagnose::run(&a),
+            Command::Diagnose(a) => {
+                commands::diagnose::settings(&a).and_then(|s| commands::diagnose::run(&s))
+            }
         });
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

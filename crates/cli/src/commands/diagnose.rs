@@ -19,8 +19,8 @@ use crate::record_csv::ColumnMap;
 use crate::steps::{identify_pair, in_order, load_excited, load_step, LoadedExcited};
 use crate::{BadInput, NotConverged};
 
-/// The command's settings, validated from its arguments.
-struct Settings {
+/// The command's settings, validated from its arguments ([`settings`]).
+pub struct Settings {
     /// The step pair, when given (`--high`, `--low`): the nominal fit starts from its
     /// identification.
     pair: Option<(PathBuf, PathBuf)>,
@@ -28,8 +28,19 @@ struct Settings {
     validation: Vec<PathBuf>,
     columns: ColumnMap,
     diagnose: DiagnoseSettings,
+    /// `--input current`: the inverse model's diagnosis instead of output error.
+    current: Option<CurrentDrive>,
+    plot: Option<PathBuf>,
     json: bool,
     quiet: bool,
+}
+
+/// What `--input current` adds: the current's torque constant and the inverse model's.
+struct CurrentDrive {
+    /// Torque (force) per unit of the current column \[N·m/A or N/A\].
+    torque_constant: f64,
+    /// The inverse model's diagnosis (filter cut-off \[Hz\], decimation, axis, candidates).
+    inverse: InverseDiagnoseSettings,
 }
 
 /// The `--candidates` list, parsed (default: every effect).
@@ -51,7 +62,11 @@ fn candidates(a: &DiagnoseArgs) -> Result<Vec<EffectKind>> {
         .collect()
 }
 
-fn settings(a: &DiagnoseArgs) -> Result<Settings> {
+/// Validates `a` into [`Settings`]: exit 2 with what to fix.
+pub fn settings(a: &DiagnoseArgs) -> Result<Settings> {
+    if a.input == DriveArg::Current {
+        return current_settings(a);
+    }
     let mut training: Vec<PathBuf> = a.high.iter().chain(&a.low).cloned().collect();
     training.extend(a.records.iter().cloned());
     if training.is_empty() {
@@ -79,16 +94,80 @@ fn settings(a: &DiagnoseArgs) -> Result<Settings> {
             max_effects: a.max_effects,
             ..DiagnoseSettings::default()
         },
+        current: None,
+        plot: a.plot.clone(),
         json: a.json,
         quiet: a.quiet,
     })
 }
 
-pub fn run(a: &DiagnoseArgs) -> Result<()> {
-    if a.input == DriveArg::Current {
-        return run_current(a);
+/// [`settings`] of `--input current`.
+fn current_settings(a: &DiagnoseArgs) -> Result<Settings> {
+    if a.records.is_empty() || a.high.is_some() {
+        return Err(BadInput(
+            "diagnose --input current needs --record FILE.csv (current and position of the axis; repeatable), not --high/--low".into(),
+        )
+        .into());
     }
-    let s = settings(a)?;
+    let Some(k) = a.torque_constant else {
+        return Err(BadInput(
+            "diagnose --input current needs --torque-constant K (the torque or force per unit of the current column)".into(),
+        )
+        .into());
+    };
+    if !(k.is_finite() && k > 0.0) {
+        return Err(BadInput(format!("--torque-constant {k}: expected a positive number")).into());
+    }
+    if a.decimation == 0 {
+        return Err(
+            BadInput("--decimation 0: expected a factor of 1 (none) or more".into()).into(),
+        );
+    }
+    if a.max_effects == 0 {
+        return Err(BadInput("--max-effects 0: give 1 or more".into()).into());
+    }
+    let candidates = candidates(a)?;
+    let columns = match &a.columns {
+        Some(text) => ColumnMap::parse(text)?,
+        None => ColumnMap::default(),
+    };
+    let geometry = match a.axis {
+        AxisArg::Rotary => AxisGeometry::Rotary,
+        AxisArg::Linear => AxisGeometry::Linear,
+    };
+    Ok(Settings {
+        pair: None,
+        training: a.records.clone(),
+        validation: a.validate.clone(),
+        columns,
+        diagnose: DiagnoseSettings::default(),
+        current: Some(CurrentDrive {
+            torque_constant: k,
+            inverse: InverseDiagnoseSettings {
+                inverse: InverseModelSettings {
+                    position_cutoff_hz: a.cutoff,
+                    decimation: a.decimation,
+                    ..InverseModelSettings::default()
+                },
+                geometry,
+                torque_constant: k,
+                candidates,
+                max_effects: a.max_effects,
+                ..InverseDiagnoseSettings::default()
+            },
+        }),
+        plot: a.plot.clone(),
+        json: a.json,
+        quiet: a.quiet,
+    })
+}
+
+/// Loads the records, diagnoses them ([`fit::diagnose`], or the inverse model's
+/// [`fit::diagnose::diagnose_inverse`] with `--input current`) and prints the report.
+pub fn run(s: &Settings) -> Result<()> {
+    if let Some(c) = &s.current {
+        return run_current(s, c);
+    }
     let load = |paths: &[PathBuf]| -> Result<Vec<LoadedExcited>> {
         paths
             .iter()
@@ -170,7 +249,7 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
     } else {
         print_report(&report, t0.elapsed().as_secs_f64());
     }
-    if let Some(dir) = &a.plot {
+    if let Some(dir) = &s.plot {
         let records: Vec<FigureRecord> = training
             .iter()
             .chain(&validation)
@@ -447,64 +526,23 @@ fn separating_test(
 
 /// `--input current`: the inverse model's torque residual of a current-driven axis,
 /// diagnosed (as `identify --input current` reads its records).
-fn run_current(a: &DiagnoseArgs) -> Result<()> {
-    if a.records.is_empty() || a.high.is_some() {
-        return Err(BadInput(
-            "diagnose --input current needs --record FILE.csv (current and position of the axis; repeatable), not --high/--low".into(),
-        )
-        .into());
-    }
-    let Some(k) = a.torque_constant else {
-        return Err(BadInput(
-            "diagnose --input current needs --torque-constant K (the torque or force per unit of the current column)".into(),
-        )
-        .into());
-    };
-    if !(k.is_finite() && k > 0.0) {
-        return Err(BadInput(format!("--torque-constant {k}: expected a positive number")).into());
-    }
-    if a.decimation == 0 {
-        return Err(
-            BadInput("--decimation 0: expected a factor of 1 (none) or more".into()).into(),
-        );
-    }
-    if a.max_effects == 0 {
-        return Err(BadInput("--max-effects 0: give 1 or more".into()).into());
-    }
-    let candidates = candidates(a)?;
-    let columns = match &a.columns {
-        Some(text) => ColumnMap::parse(text)?,
-        None => ColumnMap::default(),
-    };
-    let paths: Vec<&PathBuf> = a.records.iter().chain(&a.validate).collect();
+fn run_current(s: &Settings, c: &CurrentDrive) -> Result<()> {
+    let k = c.torque_constant;
+    let settings = &c.inverse;
+    let geometry = settings.geometry;
+    let paths: Vec<&PathBuf> = s.training.iter().chain(&s.validation).collect();
     let recs: Vec<motor_model::Record> = paths
         .iter()
-        .map(|p| crate::steps::load_axis_record(p, &columns, a.cutoff))
+        .map(|p| crate::steps::load_axis_record(p, &s.columns, settings.inverse.position_cutoff_hz))
         .collect::<Result<_>>()?;
     let torques = crate::steps::axis_torques(&recs, k);
     let axis = crate::steps::axis_records(&recs, &torques);
-    let (train, valid) = axis.split_at(a.records.len());
+    let (train, valid) = axis.split_at(s.training.len());
     let names: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
     let names: Vec<&str> = names.iter().map(String::as_str).collect();
     let label = names.join(", ");
-    let geometry = match a.axis {
-        AxisArg::Rotary => AxisGeometry::Rotary,
-        AxisArg::Linear => AxisGeometry::Linear,
-    };
-    let settings = InverseDiagnoseSettings {
-        inverse: InverseModelSettings {
-            position_cutoff_hz: a.cutoff,
-            decimation: a.decimation,
-            ..InverseModelSettings::default()
-        },
-        geometry,
-        torque_constant: k,
-        candidates,
-        max_effects: a.max_effects,
-        ..InverseDiagnoseSettings::default()
-    };
     let t0 = Instant::now();
-    let d = match diagnose_inverse(train, valid, &names, &settings) {
+    let d = match diagnose_inverse(train, valid, &names, settings) {
         Ok(d) => d,
         Err(DiagnoseError::NominalFailed(why)) => {
             return Err(NotConverged(format!(
@@ -529,7 +567,7 @@ fn run_current(a: &DiagnoseArgs) -> Result<()> {
         nominal,
         separating: None,
     };
-    if a.json {
+    if s.json {
         println!("{}", serde_json::to_string_pretty(&report_json(&report))?);
     } else {
         println!(
@@ -537,10 +575,10 @@ fn run_current(a: &DiagnoseArgs) -> Result<()> {
         );
         print_report(&report, t0.elapsed().as_secs_f64());
     }
-    if let Some(dir) = &a.plot {
-        let (torque_label, residual_label) = match a.axis {
-            AxisArg::Rotary => ("torque", "torque residual [N·m]"),
-            AxisArg::Linear => ("force", "force residual [N]"),
+    if let Some(dir) = &s.plot {
+        let (torque_label, residual_label) = match geometry {
+            AxisGeometry::Rotary => ("torque", "torque residual [N·m]"),
+            AxisGeometry::Linear => ("force", "force residual [N]"),
         };
         let named = d.named().join(" + ");
         let figures: Vec<ResidualFigure<'_>> = d
@@ -558,7 +596,7 @@ fn run_current(a: &DiagnoseArgs) -> Result<()> {
                 }),
             })
             .collect();
-        crate::figures::residual_figures(dir, &figures, &named, a.quiet)?;
+        crate::figures::residual_figures(dir, &figures, &named, s.quiet)?;
     }
     Ok(())
 }
