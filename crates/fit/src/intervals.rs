@@ -2,8 +2,9 @@
 
 use crate::full_model::PARAM_NAMES;
 
-/// The 95 % intervals `[lo, hi]` of the six motor parameters, shaped as [`MotorParams`]: each
-/// field in the unit of the parameter it bounds (Ω, H, N·m/A, N·m·s/rad, kg·m², N·m).
+/// The 95 % intervals `[lo, hi]` of the six motor parameters, shaped as
+/// [`MotorParams`](motor_model::MotorParams): each field in the unit of the parameter it
+/// bounds (Ω, H, N·m/A, N·m·s/rad, kg·m², N·m).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MotorIntervals {
     /// Armature resistance R \[Ω\].
