@@ -15,18 +15,10 @@ cd "$(dirname "$0")/.."
 base=${1:-8457ec0}
 runs=${2:-30}
 motors=${3:-1000}
-dir=${BENCH_DIR:-target/bench-identify}
-mkdir -p "$dir"
-dir=$(cd "$dir" && pwd)
 
 # The baseline's source and build, kept by commit.
-commit=$(git rev-parse "$base")
-src="$dir/src-$commit"
-if [ ! -d "$src" ]; then
-    mkdir -p "$src.tmp"
-    git archive "$commit" | tar -x -C "$src.tmp"
-    mv "$src.tmp" "$src"
-fi
+. benches/baseline.sh
+baseline_source target/bench-identify "$base"
 echo "building the baseline $base and the working tree…" >&2
 (cd "$src" && CARGO_TARGET_DIR="$dir/target-$commit" cargo build --quiet --release -p motorid)
 cargo build --quiet --release -p motorid

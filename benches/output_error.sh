@@ -16,17 +16,10 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 base=${1:-21462d2}
 runs=${2:-5}
-dir=${BENCH_DIR:-target/bench-identify}
-mkdir -p "$dir"
-dir=$(cd "$dir" && pwd)
 
-commit=$(git rev-parse "$base")
-src="$dir/src-$commit"
-if [ ! -d "$src" ]; then
-    mkdir -p "$src.tmp"
-    git archive "$commit" | tar -x -C "$src.tmp"
-    mv "$src.tmp" "$src"
-fi
+# The baseline's source and build, kept by commit.
+. benches/baseline.sh
+baseline_source target/bench-identify "$base"
 echo "building the baseline $base and the working tree…" >&2
 for tree in "$src" "$PWD"; do
     target=$([ "$tree" = "$PWD" ] && echo "$PWD/target" || echo "$dir/target-$commit")

@@ -16,17 +16,10 @@ base=${1:-main}
 runs=${2:-5}
 motors=${3:-200}
 mc_runs=${4:-200}
-dir=${BENCH_DIR:-target/bench-parallel}
-mkdir -p "$dir"
-dir=$(cd "$dir" && pwd)
 
-commit=$(git rev-parse "$base")
-src="$dir/src-$commit"
-if [ ! -d "$src" ]; then
-    mkdir -p "$src.tmp"
-    git archive "$commit" | tar -x -C "$src.tmp"
-    mv "$src.tmp" "$src"
-fi
+# The baseline's source and build, kept by commit.
+. benches/baseline.sh
+baseline_source target/bench-parallel "$base"
 echo "building the baseline $base and the working tree…" >&2
 (cd "$src" && CARGO_TARGET_DIR="$dir/target-$commit" cargo build --quiet --release -p motorid)
 cargo build --quiet --release -p motorid
