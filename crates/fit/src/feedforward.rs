@@ -1086,19 +1086,15 @@ pub fn identify_feedforward(
         .iter()
         .map(|r| problem.initial_speed(r, &report.params))
         .collect();
-    let residual_over_noise = problem
-        .quality(&report.params)
-        .iter()
-        .zip(&noise)
-        .map(|(q, s)| q.rms_residual / s)
-        .collect();
+    let quality = problem.quality(&report.params);
+    let residual_over_noise = residual_over_noise(&quality, &noise);
     Ok(FeedforwardFit {
         residual_over_noise,
         params: model.constants,
         ci95,
         tau_e,
         initial_speed_rad_s,
-        quality: problem.quality(&report.params),
+        quality,
         iterations,
         termination: report.termination,
     })
@@ -1109,24 +1105,21 @@ pub fn identify_feedforward(
 /// 0.99–1.15 on the fixtures' motors, the reduced model of an underdamped one 11–65).
 pub const EXPLAINED_RATIO: f64 = 2.0;
 
+/// Each record's residual RMS in `quality` over that record's `noise`.
+fn residual_over_noise(quality: &[ChannelQuality], noise: &[f64]) -> Vec<f64> {
+    quality
+        .iter()
+        .zip(noise)
+        .map(|(q, s)| q.rms_residual / s)
+        .collect()
+}
+
 /// Whether the model at `theta` leaves on every record a residual within
 /// [`EXPLAINED_RATIO`] of that record's `noise`.
 fn explains(problem: &FfProblem, theta: &[f64], noise: &[f64]) -> bool {
-    problem
-        .quality(theta)
+    residual_over_noise(&problem.quality(theta), noise)
         .iter()
-        .zip(noise)
-        .all(|(q, s)| q.rms_residual <= EXPLAINED_RATIO * s)
-}
-
-impl FeedforwardFit {
-    /// Whether the fit explains every record: each residual within [`EXPLAINED_RATIO`] of
-    /// the record's noise.
-    pub fn explains_records(&self) -> bool {
-        self.residual_over_noise
-            .iter()
-            .all(|&x| x <= EXPLAINED_RATIO)
-    }
+        .all(|&x| x <= EXPLAINED_RATIO)
 }
 
 /// Two stages from `theta0`: the records weighted by their noise, then (if the first
