@@ -29,7 +29,7 @@ use crate::input_uncertainty::LevelPrior;
 use crate::lm::{solve, LeastSquares, LmReport, LmSettings, NormalEquations, Termination};
 use crate::mechanical::{identify_inverse_model_pooled, AxisRecord, InverseModelSettings};
 use crate::pipeline::ParameterEstimate;
-use crate::stats::{equal_runs, newey_west_run_covariance, sandwich_uncertainty};
+use crate::stats::{equal_runs, newey_west_run_covariance, sandwich_uncertainty, Uncertainty};
 
 /// The voltage-to-speed constants of a motor (module docs).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -192,6 +192,24 @@ pub enum TauE {
     /// used. kA then holds about `(kV − k) τe` of the true τe on top of `R J/k`, and at every
     /// reversal kS trades against τe.
     Unfitted,
+    /// Fitted, but with no torque constant given the records cannot split kA from τe. The
+    /// model's speed answers the voltage through `1/(kA τe s² + (kA + τe (kV − k)) s + kV)`:
+    /// the records fix the two coefficients, `kA τe` and `lead = kA + τe (kV − k)`, and with
+    /// the viscous share `b = kV − k` unknown, a kA fits them as well as any other wherever
+    /// `τe = (kA τe)/kA` and `b = (lead − kA)/τe` are physical (`0 ≤ b ≤ kV`): every such kA
+    /// lies in `(0, lead]` (all of it when `lead² ≤ 4 (kA τe) kV`). kS and kV are determined;
+    /// kA's interval in [`FeedforwardFit::ci95`] is then `[0, upper end of lead's interval]`.
+    /// Giving k (the torque constant, [`FeedforwardSettings::torque_constant`]) splits them.
+    Traded {
+        /// `lead = kA + τe (kV − k)` \[V·s²/rad\]: the largest kA the records allow.
+        lead_v_s2_per_rad: f64,
+        /// 95 % interval of `lead` \[V·s²/rad\].
+        lead_ci95: [f64; 2],
+        /// `kA τe` \[V·s³/rad\].
+        product_v_s3_per_rad: f64,
+        /// 95 % interval of `kA τe` \[V·s³/rad\].
+        product_ci95: [f64; 2],
+    },
     /// Not asked for ([`FeedforwardSettings::electrical`] false): the reduced model.
     Neglected,
 }
@@ -548,6 +566,9 @@ struct FfProblem {
     electrical: bool,
     /// The back-EMF constant k \[V·s/rad\] if given; else taken as kV.
     back_emf: Option<f64>,
+    /// With τe and no k given: k taken as kV (the viscous share of kV fixed at 0, not a
+    /// nuisance), the fit of [`TauE::Traded`]'s two coefficients.
+    share_at_zero: bool,
     free_starts: usize,
     /// Nuisance parameters of the levels (values and instants), after the initial speeds;
     /// with τe and no k given, one more follows: the viscous share of kV (module docs).
@@ -564,7 +585,8 @@ impl FfProblem {
     /// a given k (its prior uniform over `[0, kV]`: the share is Φ(z) of a nuisance z with a unit
     /// normal prior, so that a share near 0 or 1 is as likely as one about ½).
     fn nuisances(&self) -> usize {
-        self.level_nuisances + usize::from(self.electrical && self.back_emf.is_none())
+        self.level_nuisances
+            + usize::from(self.electrical && self.back_emf.is_none() && !self.share_at_zero)
     }
 
     /// Residuals: the data and one prior per nuisance.
@@ -598,6 +620,7 @@ impl FfProblem {
         let back_emf_v_s_per_rad = match (self.electrical, self.back_emf) {
             (_, Some(k)) => k.min(kv),
             (false, None) => kv,
+            (true, None) if self.share_at_zero => kv,
             (true, None) => {
                 let share = crate::input_uncertainty::phi(theta[theta.len() - 1]);
                 kv * (1.0 - share)
@@ -963,6 +986,7 @@ pub fn identify_feedforward(
         records: prepared,
         electrical: false,
         back_emf: settings.torque_constant,
+        share_at_zero: false,
         free_starts: free,
         level_nuisances: nuisances,
         n_data,
@@ -1047,24 +1071,35 @@ pub fn identify_feedforward(
                 best = Some((fit, weights, cost));
             }
         }
-        // Kept whenever it converged: its intervals carry what τe leaves unknown. τe itself is
-        // reported where it is significantly above 0 (its interval excludes 0).
-        let kept = best.and_then(|(fit, weights, _)| {
+        // Kept whenever it converged: its intervals carry what τe leaves unknown.
+        let mut kept = None;
+        if let Some((fit, weights, _)) = best {
             for (r, s) in problem.records.iter_mut().zip(&weights) {
                 r.sigma = *s;
             }
-            let (_, ci) = intervals(&problem, &fit)?;
-            let ci = ci[3];
-            let t = if ci[0] > 0.0 {
-                TauE::Fitted {
-                    value_s: fit.params[3].exp(),
-                    ci95_s: ci,
-                }
+            let ci = intervals(&problem, &fit);
+            // Without k, kA can trade against τe and the viscous share of kV (no interval, or
+            // kA's reaching 0): then the two coefficients the records fix are fitted instead.
+            let undetermined = ci.as_ref().is_none_or(|(_, c)| c[2][0] <= 0.0);
+            kept = if settings.torque_constant.is_none() && undetermined {
+                traded(&mut problem, &fit, ks0, settings.lm, &mut iterations)?
             } else {
-                TauE::NotResolved { upper_s: ci[1] }
+                ci.map(|(_, c)| {
+                    let ci = c[3];
+                    // τe is reported where it is significantly above 0 (its interval
+                    // excludes 0).
+                    let t = if ci[0] > 0.0 {
+                        TauE::Fitted {
+                            value_s: fit.params[3].exp(),
+                            ci95_s: ci,
+                        }
+                    } else {
+                        TauE::NotResolved { upper_s: ci[1] }
+                    };
+                    (fit, t)
+                })
             };
-            Some((fit, t))
-        });
+        }
         match kept {
             Some(r) => result = r,
             None => {
@@ -1080,7 +1115,13 @@ pub fn identify_feedforward(
     let model = problem
         .params_of(&report.params)
         .ok_or_else(|| FitError::Solver("parameters left the representable range".into()))?;
-    let ci95 = intervals(&problem, &report).map(|(_, ci)| [ci[0], ci[1], ci[2]]);
+    let ci95 = intervals(&problem, &report).map(|(_, ci)| {
+        let ka = match tau_e {
+            TauE::Traded { lead_ci95, .. } => [0.0, lead_ci95[1]],
+            _ => ci[2],
+        };
+        [ci[0], ci[1], ka]
+    });
     let initial_speed_rad_s = problem
         .records
         .iter()
@@ -1154,6 +1195,22 @@ fn fit_stages(
 /// Standard errors and 95 % intervals of the model's parameters (kS, kV, kA, and τe when
 /// fitted; SI units) at `report`, from the Newey–West sandwich record by record.
 fn intervals(problem: &FfProblem, report: &LmReport) -> Option<(Vec<f64>, Vec<[f64; 2]>)> {
+    let unc = fit_uncertainty(problem, report)?;
+    let m = problem.n_model();
+    let values: Vec<f64> = report.params[..m].iter().map(|t| t.exp()).collect();
+    let std: Vec<f64> = (0..m).map(|i| values[i] * unc.std_error[i]).collect();
+    let ci = (0..m)
+        .map(|i| {
+            let half = values[i] * unc.ci95_half_width[i];
+            [values[i] - half, values[i] + half]
+        })
+        .collect();
+    Some((std, ci))
+}
+
+/// The sandwich uncertainty of every fitted parameter (in the fit's own coordinates: the
+/// logarithms of the constants and of τe, then the initial speeds and the nuisances).
+fn fit_uncertainty(problem: &FfProblem, report: &LmReport) -> Option<Uncertainty> {
     let (mut r, jac) = problem.jacobian(&report.params)?;
     // A prior's row enters the score's covariance with its expected square, 1 (its variance),
     // not the realised one: at the prior mean that would be 0 and the prior's uncertainty lost.
@@ -1169,17 +1226,65 @@ fn intervals(problem: &FfProblem, report: &LmReport) -> Option<(Vec<f64>, Vec<[f
         .collect();
     runs.extend(std::iter::repeat_n(1, priors));
     let score = newey_west_run_covariance(&r, &jac, &problem.series(), &runs)?;
-    let unc = sandwich_uncertainty(&report.normal, &score)?;
-    let m = problem.n_model();
-    let values: Vec<f64> = report.params[..m].iter().map(|t| t.exp()).collect();
-    let std: Vec<f64> = (0..m).map(|i| values[i] * unc.std_error[i]).collect();
-    let ci = (0..m)
-        .map(|i| {
-            let half = values[i] * unc.ci95_half_width[i];
-            [values[i] - half, values[i] + half]
-        })
-        .collect();
-    Some((std, ci))
+    sandwich_uncertainty(&report.normal, &score)
+}
+
+/// [`TauE::Traded`] of `fit` (with τe, no torque constant given, kA undetermined): refitted
+/// with the viscous share of kV fixed at 0, where the model's two coefficients are its own
+/// parameters (`lead = kA`, `kA τe`), their intervals from that fit's sandwich covariance (the
+/// product's by the delta method on `ln kA + ln τe`). `problem` is left in that mode when the
+/// refit gives intervals (the returned report is in its coordinates), else restored; `None`
+/// when the refit fails. kS restarts from `ks0` \[V\] (the start's) where `fit` drove it to 0,
+/// as the stage with τe does.
+fn traded(
+    problem: &mut FfProblem,
+    fit: &LmReport,
+    ks0: f64,
+    lm: LmSettings,
+    iterations: &mut u64,
+) -> Result<Option<(LmReport, TauE)>, FitError> {
+    let Some(p) = problem.params_of(&fit.params) else {
+        return Ok(None);
+    };
+    // The start: the same two coefficients with the share at 0.
+    let (ka, tau_e) = (p.constants.ka_v_s2_per_rad, p.tau_e_s);
+    let lead = ka + tau_e * (p.constants.kv_v_s_per_rad - p.back_emf_v_s_per_rad);
+    let mut theta: Vec<f64> = fit.params[..fit.params.len() - 1].to_vec();
+    theta[2] = lead.ln();
+    theta[3] = (ka * tau_e / lead).ln();
+    if theta[0] < ks0.ln() - KS_COLLAPSE_LN {
+        theta[0] = ks0.ln();
+    }
+    problem.share_at_zero = true;
+    let refit = fit_stages(problem, &theta, lm, iterations)?;
+    let traded = refit
+        .termination
+        .converged()
+        .then(|| fit_uncertainty(problem, &refit))
+        .flatten()
+        .and_then(|unc| {
+            let ratio = unc.ci95_half_width[2] / unc.std_error[2];
+            let (ln_ka, ln_tau) = (refit.params[2], refit.params[3]);
+            let lead = ln_ka.exp();
+            let product = (ln_ka + ln_tau).exp();
+            let c = &unc.covariance;
+            let h_lead = lead * unc.ci95_half_width[2];
+            let h_product =
+                product * ratio * (c[(2, 2)] + 2.0 * c[(2, 3)] + c[(3, 3)]).max(0.0).sqrt();
+            (h_lead < lead && h_product < product).then_some(TauE::Traded {
+                lead_v_s2_per_rad: lead,
+                lead_ci95: [lead - h_lead, lead + h_lead],
+                product_v_s3_per_rad: product,
+                product_ci95: [product - h_product, product + h_product],
+            })
+        });
+    match traded {
+        Some(t) => Ok(Some((refit, t))),
+        None => {
+            problem.share_at_zero = false;
+            Ok(None)
+        }
+    }
 }
 
 #[cfg(test)]

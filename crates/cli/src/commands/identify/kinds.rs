@@ -130,6 +130,21 @@ fn tau_e_text(tau_e: &TauE) -> String {
             "tau_e = L/R not resolved by these records (below {} s): kS, kV, kA are those of the model with it, their intervals carry what it leaves unknown",
             sig(*upper_s)
         ),
+        TauE::Traded {
+            lead_v_s2_per_rad,
+            lead_ci95,
+            product_v_s3_per_rad,
+            product_ci95,
+        } => format!(
+            "tau_e = L/R is not small, but with no --torque-constant the records cannot split kA from it: they fix kA tau_e = {} V·s³/rad [{}, {}] and kA + tau_e (kV - k) = {} V·s²/rad [{}, {}], and any kA up to that fits them alike (kA's interval is [0, {}]); give --torque-constant (k) to split them",
+            sig(*product_v_s3_per_rad),
+            sig(product_ci95[0]),
+            sig(product_ci95[1]),
+            sig(*lead_v_s2_per_rad),
+            sig(lead_ci95[0]),
+            sig(lead_ci95[1]),
+            sig(lead_ci95[1]),
+        ),
         TauE::Unfitted => "the fit with tau_e = L/R failed: the reduced model (tau_e = 0) is used; kA then holds about (kV - k) tau_e on top of R J/k, and at every reversal kS trades against tau_e (record at a rate above 1/tau_e, or measure the current)".into(),
         _ => "tau_e = L/R neglected: the reduced model is used (kA holds about (kV - k) tau_e on top of R J/k)".into(),
     }
@@ -139,10 +154,24 @@ fn tau_e_json(tau_e: &TauE) -> Value {
     let (status, value, ci) = match tau_e {
         TauE::Fitted { value_s, ci95_s } => ("fitted", Some(*value_s), Some(*ci95_s)),
         TauE::NotResolved { upper_s } => ("not_resolved", None, Some([0.0, *upper_s])),
+        TauE::Traded { .. } => ("traded_with_ka", None, None),
         TauE::Unfitted => ("unfitted_reduced_model", None, None),
         _ => ("neglected_reduced_model", None, None),
     };
-    json!({"status": status, "value": value, "ci95": ci, "unit": "s", "note": tau_e_text(tau_e)})
+    let mut out = json!({"status": status, "value": value, "ci95": ci, "unit": "s", "note": tau_e_text(tau_e)});
+    if let TauE::Traded {
+        lead_v_s2_per_rad,
+        lead_ci95,
+        product_v_s3_per_rad,
+        product_ci95,
+    } = tau_e
+    {
+        out["ka_plus_tau_e_viscous_share"] =
+            json!({"value": lead_v_s2_per_rad, "ci95": lead_ci95, "unit": "V·s²/rad"});
+        out["ka_times_tau_e"] =
+            json!({"value": product_v_s3_per_rad, "ci95": product_ci95, "unit": "V·s³/rad"});
+    }
+    out
 }
 
 /// Prints the voltage-and-speed report (`--json` or the table) of `fit` on `files`, with
@@ -163,7 +192,10 @@ pub fn report(a: &Settings, kind: &RecordKind, fit: &FeedforwardFit, files: &[&s
             "record_kind": kind_json(kind),
             "parameters": parameters,
             "tau_e": tau_e_json(&fit.tau_e),
-            "tau_m": {"value": fit.params.tau_m_s(), "unit": "s"},
+            "tau_m": match fit.tau_e {
+                TauE::Traded { lead_ci95, .. } => json!({"value": null, "at_most": lead_ci95[1] / fit.params.kv_v_s_per_rad, "unit": "s"}),
+                _ => json!({"value": fit.params.tau_m_s(), "unit": "s"}),
+            },
             "initial_speed": fit.initial_speed_rad_s.iter().zip(files).map(|(w, f)| json!({"record": f, "value": w, "unit": "rad/s"})).collect::<Vec<_>>(),
             "given": {"R": a.resistance, "k": a.torque_constant},
             "quality": {
@@ -179,7 +211,9 @@ pub fn report(a: &Settings, kind: &RecordKind, fit: &FeedforwardFit, files: &[&s
         println!(
             "voltage and speed: E = kS sign(w) + kV w + kA dw/dt ({}) fitted by output error on the speed{}",
             match fit.tau_e {
-                TauE::Fitted { .. } | TauE::NotResolved { .. } => "with the electrical lag tau_e",
+                TauE::Fitted { .. } | TauE::NotResolved { .. } | TauE::Traded { .. } => {
+                    "with the electrical lag tau_e"
+                }
                 _ => "the reduced model, tau_e = 0",
             },
             match known {
@@ -198,9 +232,15 @@ pub fn report(a: &Settings, kind: &RecordKind, fit: &FeedforwardFit, files: &[&s
             }
             println!("  {:<3} {:>12}   {ci:<27} {}", p.name, sig(p.value), p.unit);
         }
+        let tau_m = match fit.tau_e {
+            TauE::Traded { lead_ci95, .. } => format!(
+                "at most {} s",
+                sig(lead_ci95[1] / fit.params.kv_v_s_per_rad)
+            ),
+            _ => format!("{} s", sig(fit.params.tau_m_s())),
+        };
         println!(
-            "derived: tau_m = kA/kV = {} s; {}",
-            sig(fit.params.tau_m_s()),
+            "derived: tau_m = kA/kV = {tau_m}; {}",
             tau_e_text(&fit.tau_e)
         );
         for (w, f) in fit.initial_speed_rad_s.iter().zip(files) {
