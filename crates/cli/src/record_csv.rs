@@ -795,12 +795,17 @@ fn to_record(
         get(table, name)?.ok_or((
             header_line,
             format!(
-                "no `{}` column in the header `{names}`: a record needs {} (map other names with --columns)",
+                "no `{}` column in the header `{names}`: a record needs {} (map other names with --columns){}",
                 map.header(name),
                 match (need_voltage, need_current) {
                     (true, true) => "t, current, voltage",
                     (false, _) => "t, current",
                     (true, false) => "t, voltage and a current, speed or position",
+                },
+                if name == "current" && need_voltage && need_current {
+                    "; without a current sensor, `identify --record FILE` fits voltage and speed alone (kS, kV, kA; J, f, Ts with --resistance and --torque-constant)"
+                } else {
+                    ""
                 }
             ),
         ))

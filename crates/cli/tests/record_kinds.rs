@@ -326,6 +326,36 @@ fn records_that_cannot_answer_are_refused_in_one_line() {
         ],
         "--resistance 0",
     );
+    // Too short for the fit: said in its own terms (the start's decimation is not the user's).
+    let short_full = dir.join("short_full.csv");
+    let mut args = vec![
+        "--voltage",
+        "10",
+        "--duration",
+        "0.05",
+        "--rate",
+        "1000",
+        "--quiet",
+    ];
+    args.extend(logger(false));
+    simulate_to(&short_full, &args);
+    let short = dir.join("short.csv");
+    without(&short_full, &short, &["current"], 0.0);
+    assert_bad_input(
+        &["identify", "--record", short.to_str().unwrap()],
+        "51 samples: the voltage-and-speed fit needs at least 110",
+    );
+    // A step pair without current: the message points to the fit of voltage and speed.
+    assert_bad_input(
+        &[
+            "identify",
+            "--high",
+            path.to_str().unwrap(),
+            "--low",
+            path.to_str().unwrap(),
+        ],
+        "without a current sensor, `identify --record FILE` fits voltage and speed alone",
+    );
 }
 
 /// One record of a fixture motor: `simulate`'s input options and where the record is cut

@@ -260,6 +260,8 @@ const MAX_CHECKS: usize = 64;
 /// How far \[ln\] below its start the reduced fit may take kS before the τe stage restarts
 /// it from the start (a factor of 1000).
 const KS_COLLAPSE_LN: f64 = 6.907755278982137;
+/// Decimation of the start's inverse model.
+const START_DECIMATION: usize = 5;
 /// Cut-offs of the start's position filter, as fractions of the sample rate, tried in turn.
 const START_CUTOFFS: [f64; 3] = [0.02, 0.005, 0.00125];
 /// Bisections locating a zero crossing of the speed (2⁻⁵⁰ of a check interval).
@@ -916,7 +918,18 @@ pub fn identify_feedforward(
         positions.push(position);
     }
     // Start: the inverse model E = kA Ω̇ + kV Ω + kS sign Ω on every record, the voltage as
-    // the "torque" (no offset: the model has none).
+    // the "torque" (no offset: the model has none), decimated by START_DECIMATION: a record
+    // too short for it is refused here, in the fit's own terms.
+    let min = crate::mechanical::min_samples(START_DECIMATION);
+    if let Some(r) = prepared.iter().find(|r| r.n < min) {
+        return Err(bad(
+            "record",
+            format!(
+                "{} samples: the voltage-and-speed fit needs at least {min} (record for longer, or at a higher rate)",
+                r.n
+            ),
+        ));
+    }
     let voltages: Vec<Vec<f64>> = prepared
         .iter()
         .map(|r| {
@@ -946,7 +959,7 @@ pub fn identify_feedforward(
             InverseModelSettings {
                 position_cutoff_hz: fraction / dt_min,
                 position_filter_order: 4,
-                decimation: 5,
+                decimation: START_DECIMATION,
                 fit_offset: false,
             },
         );

@@ -204,7 +204,7 @@ fn record_rows(
             ),
         ));
     }
-    let min = 20 * settings.decimation.max(1) + 10;
+    let min = min_samples(settings.decimation);
     if n < min {
         return Err(bad(
             "record",
@@ -570,4 +570,10 @@ fn central(y: &[f64], dt: f64) -> Vec<f64> {
             (i, _) => (y[i + 1] - y[i - 1]) / (2.0 * dt),
         })
         .collect()
+}
+
+/// Fewest samples a record needs for the inverse model at `decimation` (twenty decimated rows,
+/// plus the filter's start).
+pub(crate) fn min_samples(decimation: usize) -> usize {
+    20 * decimation.max(1) + 10
 }
