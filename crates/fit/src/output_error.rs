@@ -20,6 +20,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use motor_model::{central_difference, steady_state, Effects, Input, MotorParams, Simulator};
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 
 use crate::error::FitError;
 use crate::full_model::{
@@ -478,28 +479,20 @@ impl OeProblem {
     }
 
     /// Residuals at `theta` and the columns `which` of their Jacobian in θ (forward
-    /// differences, the perturbed simulations run in parallel), on the RK4 step in use.
+    /// differences, the perturbed simulations run in parallel on rayon's pool, so that a fit
+    /// already running on that pool shares its threads), on the RK4 step in use.
     fn jacobian_columns(&self, theta: &[f64], which: &[usize]) -> Option<(Vec<f64>, DMatrix<f64>)> {
         let r0 = self.residuals(theta)?;
         let p = which.len();
-        let columns: Vec<Option<Vec<f64>>> = std::thread::scope(|scope| {
-            let handles: Vec<_> = which
-                .iter()
-                .map(|&j| {
-                    let r0 = &r0;
-                    scope.spawn(move || {
-                        let mut th = theta.to_vec();
-                        th[j] += FD_STEP;
-                        let r = self.residuals(&th)?;
-                        Some(r.iter().zip(r0).map(|(a, b)| (a - b) / FD_STEP).collect())
-                    })
-                })
-                .collect();
-            handles
-                .into_iter()
-                .map(|h| h.join().ok().flatten())
-                .collect()
-        });
+        let columns: Vec<Option<Vec<f64>>> = which
+            .par_iter()
+            .map(|&j| {
+                let mut th = theta.to_vec();
+                th[j] += FD_STEP;
+                let r = self.residuals(&th)?;
+                Some(r.iter().zip(&r0).map(|(a, b)| (a - b) / FD_STEP).collect())
+            })
+            .collect();
         let mut jac = DMatrix::zeros(r0.len(), p);
         for (j, col) in columns.into_iter().enumerate() {
             let col = col?;
