@@ -1013,14 +1013,12 @@ fn localise_all(
             })
         })
         .collect();
-    let fallback: Vec<String> = (0..all.len())
-        .map(|k| format!("record {}", k + 1))
-        .collect();
+    let shown = super::record_names(names, all.len());
     let records: Vec<ResidualRecord<'_>> = all
         .iter()
         .enumerate()
         .map(|(k, r)| ResidualRecord {
-            name: names.get(k).copied().unwrap_or(fallback[k].as_str()),
+            name: &shown[k],
             dt: r.dt,
             voltage: &voltages[k],
             current: Some(r.current),
