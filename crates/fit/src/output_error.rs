@@ -632,6 +632,10 @@ pub(crate) fn predict_with_step_factor(
     effects: &Effects,
     step_factor: f64,
 ) -> Result<Vec<FittedChannel>, FitError> {
+    // Every sample is predicted, the masks set aside; still, they must align.
+    for (k, r) in records.iter().enumerate() {
+        crate::checks::check_aligned(&format!("record {}", k + 1), r.channels())?;
+    }
     let all: Vec<ExcitedRecord<'_>> = records
         .iter()
         .map(|r| ExcitedRecord {
@@ -736,16 +740,7 @@ pub(crate) fn output_error_sensitivity(
 /// Checks record `k` (0-based): aligned, finite channels of enough samples, a positive period.
 fn check_record(k: usize, rec: &ExcitedRecord<'_>) -> Result<(), FitError> {
     let label = format!("record {}", k + 1);
-    crate::checks::check_channels(
-        &label,
-        crate::checks::Channels {
-            current: rec.current,
-            speed: rec.speed,
-            position: rec.position,
-            exclude_current: rec.exclude_current,
-            exclude_speed: rec.exclude_speed,
-        },
-    )?;
+    crate::checks::check_channels(&label, rec.channels())?;
     if !(rec.dt.is_finite() && rec.dt > 0.0) {
         return Err(bad(
             label,

@@ -406,6 +406,7 @@ pub fn speed_check_c8(
     start: Params33,
     settings: crate::lm::LmSettings,
 ) -> Result<SpeedCheck, FitError> {
+    crate::checks::check_aligned("high-voltage test", high.channels())?;
     let speed = high.speed.ok_or_else(|| FitError::BadData {
         series: "high-voltage speed".into(),
         reason: "the (C.8) check needs a speed or position channel".into(),

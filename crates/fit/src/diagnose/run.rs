@@ -838,6 +838,11 @@ pub fn diagnose(
         }
         .into());
     }
+    // The channels and masks must align before the held-out blocks are merged into the masks.
+    let shown = super::record_names(names, records.len() + validation.len());
+    for (r, name) in records.iter().chain(validation).zip(&shown) {
+        crate::checks::check_aligned(name, r.channels())?;
+    }
     // The training records: whole, or with their held-out blocks excluded.
     let masks = validation.is_empty().then(|| split(records, settings));
     let train: Vec<ExcitedRecord<'_>> = match &masks {
