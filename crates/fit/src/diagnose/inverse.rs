@@ -942,14 +942,7 @@ fn run_stage(
     let mut next = None;
     for r in refits {
         let mut c = r.report;
-        if let Some(rank) = verdict.ranked.iter().find(|x| x.name == c.name) {
-            c.significant = rank.significant;
-            c.p_value = rank.p_value;
-            c.heldout_p_value = rank.heldout_p_value;
-            if rank.significant {
-                c.assessment = Assessment::Significant;
-            }
-        }
+        c.take_rank(&verdict);
         if verdict.verdict.as_deref() == Some(c.name) {
             next = r.chosen;
         }

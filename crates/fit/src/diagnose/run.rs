@@ -240,6 +240,21 @@ pub struct CandidateReport {
 }
 
 impl CandidateReport {
+    /// Takes the significance and the p-values of this candidate's row of `verdict` (its
+    /// assessment becomes [`Assessment::Significant`] where significant); unranked, unchanged.
+    pub(crate) fn take_rank(&mut self, verdict: &Verdict) {
+        if let Some(r) = verdict.ranked.iter().find(|r| r.name == self.name) {
+            self.significant = r.significant;
+            self.p_value = r.p_value;
+            self.heldout_p_value = r.heldout_p_value;
+            if r.significant {
+                self.assessment = Assessment::Significant;
+            }
+        }
+    }
+}
+
+impl CandidateReport {
     /// Whether it was refitted (its refit's figures are set).
     pub fn refitted(&self) -> bool {
         self.motor.is_some()
@@ -1320,14 +1335,7 @@ fn run_stage(
     let verdict = rank_candidates(&scores, &settings.verdict);
     let mut candidates: Vec<CandidateReport> = results.into_iter().map(|(c, _, _)| c).collect();
     for c in &mut candidates {
-        if let Some(r) = verdict.ranked.iter().find(|r| r.name == c.name) {
-            c.significant = r.significant;
-            c.p_value = r.p_value;
-            c.heldout_p_value = r.heldout_p_value;
-            if r.significant {
-                c.assessment = Assessment::Significant;
-            }
-        }
+        c.take_rank(&verdict);
     }
     Stage {
         base: base.effects.list().iter().map(Effect::name).collect(),
