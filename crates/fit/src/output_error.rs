@@ -32,7 +32,9 @@ use crate::input_uncertainty::{
     VoltageScale,
 };
 use crate::lm::{LeastSquares, LmSettings, NormalEquations};
-use crate::mechanical::{identify_inverse_model_pooled, AxisRecord, InverseModelSettings};
+use crate::mechanical::{
+    identify_inverse_model_pooled, motor_torque, AxisRecord, InverseModelSettings,
+};
 use crate::parameters::Parameters;
 use crate::plausibility::RecordFacts;
 use crate::signal::Butterworth;
@@ -1216,7 +1218,7 @@ fn equation_error_estimate(
     // filtered on its own, samples at rest left out), so that its error is the real one.
     let torques: Vec<Vec<f64>> = records
         .iter()
-        .map(|rec| rec.current.iter().map(|i| k * i).collect())
+        .map(|rec| motor_torque(k, rec.current))
         .collect();
     let axis: Vec<AxisRecord<'_>> = per_record
         .iter()
