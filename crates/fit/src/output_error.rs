@@ -19,7 +19,7 @@
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use motor_model::{central_difference, steady_state, Effects, Input, MotorParams, Simulator};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 use rayon::prelude::*;
 
 use crate::error::FitError;
@@ -31,7 +31,7 @@ use crate::input_uncertainty::{
     estimate_level, fit_with_inputs, LevelEstimate, LevelPrior, Nuisance, NuisanceProblem,
     VoltageScale,
 };
-use crate::lm::{LeastSquares, LmSettings, NormalEquations};
+use crate::lm::{half_squared_norm, LeastSquares, LmSettings, NormalEquations};
 use crate::mechanical::{
     identify_inverse_model_pooled, motor_torque, AxisRecord, InverseModelSettings,
 };
@@ -510,21 +510,12 @@ impl LeastSquares for OeProblem {
     }
 
     fn cost(&self, theta: &[f64]) -> Option<f64> {
-        let r = self.residuals(theta)?;
-        Some(0.5 * r.iter().map(|v| v * v).sum::<f64>())
+        Some(half_squared_norm(&self.residuals(theta)?))
     }
 
     fn normal_equations(&self, theta: &[f64]) -> Option<NormalEquations> {
         let (r, jac) = self.jacobian(theta)?;
-        let r = DVector::from_vec(r);
-        let jtj = jac.tr_mul(&jac);
-        let jtr = jac.tr_mul(&r);
-        Some(NormalEquations {
-            jtj,
-            jtr,
-            cost: 0.5 * r.norm_squared(),
-            n_residuals: self.n_residuals,
-        })
+        Some(NormalEquations::from_jacobian(r, &jac))
     }
 }
 
