@@ -47,8 +47,7 @@ pub fn fit_figures(
     fit: &FullFit,
     quiet: bool,
 ) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(dir)
-        .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
+    crate::output::create_dir(dir)?;
     let mut written = Vec::new();
     for (r, rec) in records.iter().enumerate() {
         // Channels fitted on the same samples share a figure.
@@ -154,8 +153,7 @@ pub fn residual_figures(
     named: &str,
     quiet: bool,
 ) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(dir)
-        .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
+    crate::output::create_dir(dir)?;
     let mut written = Vec::new();
     let after_label = format!("with {named}");
     for f in figures {

@@ -71,47 +71,32 @@ fn quiet_broken_pipe() {
 /// The output paths a command line names, for [`output::check`] before any work starts.
 fn declared_outputs(command: &Command) -> Vec<output::Declared> {
     use output::Declared::{Dir, File};
+    use std::path::PathBuf;
+    let file = |flag, path: &PathBuf| File {
+        flag,
+        path: path.clone(),
+    };
+    let dir = |flag, path: &PathBuf| Dir {
+        flag,
+        path: path.clone(),
+    };
     let mut outputs = Vec::new();
     match command {
-        Command::Simulate(a) => outputs.extend(a.output.iter().map(|path| File {
-            flag: "-o",
-            path: path.clone(),
-        })),
-        Command::Acquire(a) => outputs.push(File {
-            flag: "-o",
-            path: a.output.clone(),
-        }),
-        Command::Demo(a) => outputs.extend(a.out.iter().map(|path| Dir {
-            flag: "--out",
-            path: path.clone(),
-        })),
-        Command::Fleet(a) => outputs.push(Dir {
-            flag: "--out",
-            path: a.out.clone(),
-        }),
-        Command::Emps(a) => outputs.extend(a.plot.iter().map(|path| Dir {
-            flag: "--plot",
-            path: path.clone(),
-        })),
+        Command::Simulate(a) => outputs.extend(a.output.iter().map(|p| file("-o", p))),
+        Command::Acquire(a) => outputs.push(file("-o", &a.output)),
+        Command::Demo(a) => outputs.extend(a.out.iter().map(|p| dir("--out", p))),
+        Command::Fleet(a) => outputs.push(dir("--out", &a.out)),
+        Command::Emps(a) => outputs.extend(a.plot.iter().map(|p| dir("--plot", p))),
         Command::Identify(a) => {
-            outputs.extend(a.plot.iter().map(|path| Dir {
-                flag: "--plot",
-                path: path.clone(),
-            }));
+            outputs.extend(a.plot.iter().map(|p| dir("--plot", p)));
             // The summaries go into the batch folder; a missing folder is the batch's own error.
-            if let Some(dir) = a.batch.as_ref().filter(|d| d.is_dir()) {
+            if let Some(batch) = a.batch.as_ref().filter(|d| d.is_dir()) {
                 for name in ["summary.csv", "summary.json"] {
-                    outputs.push(File {
-                        flag: "--batch",
-                        path: dir.join(name),
-                    });
+                    outputs.push(file("--batch", &batch.join(name)));
                 }
             }
         }
-        Command::Diagnose(a) => outputs.extend(a.plot.iter().map(|path| Dir {
-            flag: "--plot",
-            path: path.clone(),
-        })),
+        Command::Diagnose(a) => outputs.extend(a.plot.iter().map(|p| dir("--plot", p))),
         Command::Model(_) | Command::Montecarlo(_) | Command::Emulate(_) => {}
     }
     outputs

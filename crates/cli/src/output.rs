@@ -61,6 +61,11 @@ pub fn check(outputs: &[Declared]) -> Result<()> {
     Ok(())
 }
 
+/// Creates the folder `dir` and any missing parents (a folder already there is fine).
+pub fn create_dir(dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| anyhow!("cannot create {}: {e}", dir.display()))
+}
+
 /// Writes `bytes` to `path` as the module overview describes.
 pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
     write_with(path, |out| Ok(out.write_all(bytes)?))

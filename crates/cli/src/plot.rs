@@ -90,6 +90,22 @@ fn draw_err(path: &Path) -> impl Fn(&dyn std::fmt::Display) -> anyhow::Error + '
     move |e| anyhow!("drawing {}: {e}", path.display())
 }
 
+/// Draws the legend of the labelled series of `chart` on a white box with a black border.
+fn draw_legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    draw: &impl Fn(&dyn std::fmt::Display) -> anyhow::Error,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| draw(&e))
+}
+
 fn draw_time_series<DB: DrawingBackend>(
     root: DrawingArea<DB, Shift>,
     path: &Path,
@@ -147,12 +163,7 @@ where
                 .label(s.label)
                 .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| draw(&e))?;
+        draw_legend(&mut chart, &draw)?;
     }
     root.present().map_err(|e| draw(&e))?;
     Ok(())
@@ -286,12 +297,7 @@ where
         .map_err(|e| draw(&e))?
         .label(plot.points.0)
         .legend(|(x, y)| Circle::new((x + 10, y), 5, OTHER.filled()));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|e| draw(&e))?;
+    draw_legend(&mut chart, &draw)?;
     root.present().map_err(|e| draw(&e))?;
     Ok(())
 }

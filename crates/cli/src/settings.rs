@@ -98,27 +98,21 @@ pub fn volts(option: &str, v: f64) -> Result<f64> {
 
 /// A length of time \[s\] of `option`: finite and greater than zero.
 pub fn duration(option: &str, s: f64) -> Result<f64> {
-    if s.is_finite() && s > 0.0 {
-        Ok(s)
-    } else {
-        Err(BadInput(format!(
-            "{option} {}: expected a record length greater than 0 s",
-            shown(s)
-        ))
-        .into())
-    }
+    positive(option, s, "a record length greater than 0 s")
 }
 
 /// A sample rate \[Hz\] of `option`: finite and greater than zero.
 pub fn rate(option: &str, hz: f64) -> Result<f64> {
-    if hz.is_finite() && hz > 0.0 {
-        Ok(hz)
+    positive(option, hz, "a sample rate greater than 0 Hz")
+}
+
+/// `v` of `option` if finite and greater than zero; else the bad-input line saying that
+/// `expected` was.
+fn positive(option: &str, v: f64, expected: &str) -> Result<f64> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
     } else {
-        Err(BadInput(format!(
-            "{option} {}: expected a sample rate greater than 0 Hz",
-            shown(hz)
-        ))
-        .into())
+        Err(BadInput(format!("{option} {}: expected {expected}", shown(v))).into())
     }
 }
 

@@ -358,7 +358,7 @@ pub fn load_axis_record(path: &Path, map: &ColumnMap, cutoff_hz: f64) -> Result<
 /// current column.
 pub fn axis_torques(recs: &[Record], k: f64) -> Vec<Vec<f64>> {
     recs.iter()
-        .map(|r| r.current.iter().map(|i| k * i).collect())
+        .map(|r| fit::motor_torque(k, &r.current))
         .collect()
 }
 

@@ -288,6 +288,27 @@ impl<L: Link> Session<'_, L> {
         Ok(self.inbox.len() > before)
     }
 
+    /// [`Session::pump`] for up to 50 ms, then every queued reply taken from the inbox: the
+    /// sample blocks stored into `samples`, the others returned in order, with whether any
+    /// reply arrived.
+    fn pump_samples(
+        &mut self,
+        samples: &mut [Option<Sample>],
+    ) -> Result<(bool, Vec<Got>), AcquireError> {
+        let heard = self.pump(Duration::from_millis(50))?;
+        let mut others = Vec::new();
+        while let Some(got) = self.inbox.pop_front() {
+            match got {
+                Got::Samples {
+                    first,
+                    samples: block,
+                } => store(samples, &mut self.stats, first, &block),
+                other => others.push(other),
+            }
+        }
+        Ok((heard, others))
+    }
+
     /// Sends `command` until `accept` takes a reply (other replies are kept in the inbox for
     /// later), retrying on timeouts.
     fn request<T>(
@@ -394,15 +415,12 @@ fn collect<L: Link>(
     let mut silent_since = Instant::now();
     s.stats.phase = Phase::Test;
     while !finished {
-        if s.pump(Duration::from_millis(50))? {
+        let (heard, others) = s.pump_samples(samples)?;
+        if heard {
             silent_since = Instant::now();
         }
-        while let Some(got) = s.inbox.pop_front() {
+        for got in others {
             match got {
-                Got::Samples {
-                    first,
-                    samples: block,
-                } => store(samples, &mut s.stats, first, &block),
                 Got::End { total } => {
                     if u64::from(total) != expected {
                         return Err(AcquireError::Lost(format!(
@@ -481,20 +499,11 @@ fn collect<L: Link>(
         }
         let mut silent_since = Instant::now();
         loop {
-            if s.pump(Duration::from_millis(50))? {
+            let (heard, others) = s.pump_samples(samples)?;
+            if heard {
                 silent_since = Instant::now();
             }
-            let mut ended = false;
-            while let Some(got) = s.inbox.pop_front() {
-                match got {
-                    Got::Samples {
-                        first,
-                        samples: block,
-                    } => store(samples, &mut s.stats, first, &block),
-                    Got::End { .. } => ended = true,
-                    _ => {}
-                }
-            }
+            let ended = others.iter().any(|got| matches!(got, Got::End { .. }));
             progress(&s.stats);
             // The round is over at its End, or when every sample asked for is here (the End
             // may be the frame that was lost), or after 2 s of silence.

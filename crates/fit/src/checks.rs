@@ -27,6 +27,27 @@ pub(crate) struct Channels<'a> {
     pub exclude_speed: Option<&'a [bool]>,
 }
 
+/// The measured channels and exclusion masks of a record, for the checks.
+macro_rules! channels_of {
+    ($($record:ty),*) => {
+        $(
+            impl<'a> $record {
+                /// The measured channels and exclusion masks, for the checks.
+                pub(crate) fn channels(&self) -> Channels<'a> {
+                    Channels {
+                        current: self.current,
+                        speed: self.speed,
+                        position: self.position,
+                        exclude_current: self.exclude_current,
+                        exclude_speed: self.exclude_speed,
+                    }
+                }
+            }
+        )*
+    };
+}
+channels_of!(StepTest<'a>, crate::output_error::ExcitedRecord<'a>);
+
 /// Channels of one record: enough samples, aligned and finite, exclusion masks of the same
 /// length leaving at least [`MIN_SAMPLES`] samples.
 pub(crate) fn check_channels(label: &str, c: Channels<'_>) -> Result<(), FitError> {
@@ -37,21 +58,13 @@ pub(crate) fn check_channels(label: &str, c: Channels<'_>) -> Result<(), FitErro
             format!("{n} samples: at least {MIN_SAMPLES} are needed"),
         ));
     }
+    check_aligned(label, c)?;
     for (name, data) in [
         ("current", Some(c.current)),
         ("speed", c.speed),
         ("position", c.position),
     ] {
         let Some(y) = data else { continue };
-        if y.len() != n {
-            return Err(bad(
-                label,
-                format!(
-                    "{name} has {} samples where the current has {n}: the channels must align",
-                    y.len()
-                ),
-            ));
-        }
         if let Some((i, v)) = y.iter().enumerate().find(|(_, v)| !v.is_finite()) {
             return Err(bad(
                 label,
@@ -61,15 +74,6 @@ pub(crate) fn check_channels(label: &str, c: Channels<'_>) -> Result<(), FitErro
     }
     for (name, mask) in [("current", c.exclude_current), ("speed", c.exclude_speed)] {
         if let Some(m) = mask {
-            if m.len() != n {
-                return Err(bad(
-                    label,
-                    format!(
-                        "the {name} exclusion mask has {} samples where the current has {n}",
-                        m.len()
-                    ),
-                ));
-            }
             let kept = m.iter().filter(|&&x| !x).count();
             if kept < MIN_SAMPLES {
                 return Err(bad(label, format!("only {kept} {name} samples are left once the clipped ones are excluded: widen the ADC range")));
@@ -79,19 +83,40 @@ pub(crate) fn check_channels(label: &str, c: Channels<'_>) -> Result<(), FitErro
     Ok(())
 }
 
+/// Channels of one record aligned: the speed, the angle and both exclusion masks, where
+/// given, as long as the current.
+pub(crate) fn check_aligned(label: &str, c: Channels<'_>) -> Result<(), FitError> {
+    let n = c.current.len();
+    let align = ": the channels must align";
+    let lengths = [
+        ("speed", c.speed.map(<[f64]>::len), align),
+        ("position", c.position.map(<[f64]>::len), align),
+        (
+            "the current exclusion mask",
+            c.exclude_current.map(<[bool]>::len),
+            "",
+        ),
+        (
+            "the speed exclusion mask",
+            c.exclude_speed.map(<[bool]>::len),
+            "",
+        ),
+    ];
+    for (what, len, tail) in lengths {
+        if let Some(len) = len.filter(|&len| len != n) {
+            return Err(bad(
+                label,
+                format!("{what} has {len} samples where the current has {n}{tail}"),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Basic soundness of one step test: enough samples, aligned finite channels, a real step,
 /// a current that varies, and (where speed or angle is measured) a rotor that moves.
 pub fn check_step_test(label: &str, t: &StepTest<'_>) -> Result<(), FitError> {
-    check_channels(
-        label,
-        Channels {
-            current: t.current,
-            speed: t.speed,
-            position: t.position,
-            exclude_current: t.exclude_current,
-            exclude_speed: t.exclude_speed,
-        },
-    )?;
+    check_channels(label, t.channels())?;
     if !(t.dt.is_finite() && t.dt > 0.0 && t.t_first.is_finite() && t.t_first >= 0.0) {
         return Err(bad(label, format!("first sample {} s after the step, period {} s: expected t_first ≥ 0 and a positive period", t.t_first, t.dt)));
     }

@@ -21,12 +21,14 @@
 //! ([`crate::identify_inverse_model_pooled`] with the voltage as the "torque").
 
 use motor_model::{central_difference, Input, MotorParams};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 
 use crate::error::FitError;
 use crate::full_model::{noise_std, quality_from_sums, Channel, ChannelQuality};
 use crate::input_uncertainty::LevelPrior;
-use crate::lm::{solve, LeastSquares, LmReport, LmSettings, NormalEquations, Termination};
+use crate::lm::{
+    half_squared_norm, solve, LeastSquares, LmReport, LmSettings, NormalEquations, Termination,
+};
 use crate::mechanical::{identify_inverse_model_pooled, AxisRecord, InverseModelSettings};
 use crate::pipeline::ParameterEstimate;
 use crate::stats::{equal_runs, newey_west_run_covariance, sandwich_uncertainty, Uncertainty};
@@ -746,19 +748,12 @@ impl LeastSquares for FfProblem {
     }
 
     fn cost(&self, theta: &[f64]) -> Option<f64> {
-        let r = self.residuals(theta)?;
-        Some(0.5 * r.iter().map(|v| v * v).sum::<f64>())
+        Some(half_squared_norm(&self.residuals(theta)?))
     }
 
     fn normal_equations(&self, theta: &[f64]) -> Option<NormalEquations> {
         let (r, jac) = self.jacobian(theta)?;
-        let r = DVector::from_vec(r);
-        Some(NormalEquations {
-            jtj: jac.tr_mul(&jac),
-            jtr: jac.tr_mul(&r),
-            cost: 0.5 * r.norm_squared(),
-            n_residuals: self.n_residuals(),
-        })
+        Some(NormalEquations::from_jacobian(r, &jac))
     }
 }
 

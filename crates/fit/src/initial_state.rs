@@ -117,6 +117,7 @@ pub fn detect_initial_state(record: &ExcitedRecord<'_>) -> Result<DetectedInitia
     if n < 3 {
         return Err(bad(format!("{n} samples: too few to tell how it starts")));
     }
+    crate::checks::check_aligned("record", record.channels())?;
     let speed: Vec<f64> = match (record.position, record.speed) {
         (Some(angle), _) => {
             let times: Vec<f64> = (0..angle.len()).map(|i| i as f64 * record.dt).collect();

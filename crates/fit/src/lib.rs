@@ -88,7 +88,7 @@ pub use lm::{
     solve, LeastSquares, LevenbergMarquardt, LmReport, LmSettings, NormalEquations, Termination,
 };
 pub use mechanical::{
-    identify_inverse_model, identify_inverse_model_pooled, AxisRecord, FittedTorque,
+    identify_inverse_model, identify_inverse_model_pooled, motor_torque, AxisRecord, FittedTorque,
     InverseModelSettings, MechanicalFit, OffsetStatus, MECHANICAL_NAMES, MECHANICAL_UNITS_LINEAR,
     MECHANICAL_UNITS_ROTARY,
 };

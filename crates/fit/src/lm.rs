@@ -36,6 +36,26 @@ pub struct NormalEquations {
     pub n_residuals: usize,
 }
 
+impl NormalEquations {
+    /// The normal equations of the residuals `r` and their dense Jacobian `jac` (a row per
+    /// residual, a column per parameter): `JᵀJ`, `Jᵀr` and `½‖r‖²`.
+    pub(crate) fn from_jacobian(r: Vec<f64>, jac: &DMatrix<f64>) -> NormalEquations {
+        let n_residuals = r.len();
+        let r = DVector::from_vec(r);
+        NormalEquations {
+            jtj: jac.tr_mul(jac),
+            jtr: jac.tr_mul(&r),
+            cost: 0.5 * r.norm_squared(),
+            n_residuals,
+        }
+    }
+}
+
+/// `½‖r‖²` of the residuals `r`, the cost [`LeastSquares::cost`] returns.
+pub(crate) fn half_squared_norm(r: &[f64]) -> f64 {
+    0.5 * r.iter().map(|v| v * v).sum::<f64>()
+}
+
 /// A nonlinear least-squares problem as the solver sees it.
 pub trait LeastSquares {
     /// Number of parameters.

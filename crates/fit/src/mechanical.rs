@@ -303,6 +303,13 @@ fn record_rows(
     })
 }
 
+/// The motor torque `k I` of Eq. (2b) at each sample of `current` \[A\], with the torque
+/// constant `k_nm_per_a` \[N·m/A\] (on a linear axis N/A, the force \[N\]): the `torque` of an
+/// [`AxisRecord`] of a current-driven axis.
+pub fn motor_torque(k_nm_per_a: f64, current: &[f64]) -> Vec<f64> {
+    current.iter().map(|i| k_nm_per_a * i).collect()
+}
+
 /// The regressor rows of every record (see [`identify_inverse_model_pooled`]).
 pub(crate) fn regressor_rows(
     records: &[AxisRecord<'_>],

@@ -85,16 +85,7 @@ impl Record33<'_> {
     /// The model at `p` on the grid, `LANES` interleaved samples at a time: `None` outside the
     /// model's domain (α, σ, ωa must be positive).
     fn lanes<const LANES: usize>(&self, p: &Params33) -> Option<Lanes<'_, LANES>> {
-        let Params33 {
-            alpha,
-            sigma,
-            omega_a,
-        } = *p;
-        if !(alpha > 0.0 && sigma > 0.0 && omega_a > 0.0) {
-            return None;
-        }
-        let phi = (1.0 / alpha).asinh();
-        let (rate_a, rate_b) = (omega_a - sigma, -(omega_a + sigma));
+        let (phi, rate_a, rate_b) = phase_and_rates(p)?;
         let chunk_span = LANES as f64 * self.dt;
         Some(Lanes {
             y: self.normalized_current,
@@ -110,6 +101,20 @@ impl Record33<'_> {
             next: 0,
         })
     }
+}
+
+/// The phase `φ = asinh(1/α)` and the two exponential rates `ωa − σ` and `−(ωa + σ)` \[1/s\]
+/// of Eq. (33) at `p`: `None` outside the model's domain (α, σ, ωa must be positive).
+fn phase_and_rates(p: &Params33) -> Option<(f64, f64, f64)> {
+    let Params33 {
+        alpha,
+        sigma,
+        omega_a,
+    } = *p;
+    if !(alpha > 0.0 && sigma > 0.0 && omega_a > 0.0) {
+        return None;
+    }
+    Some(((1.0 / alpha).asinh(), omega_a - sigma, -(omega_a + sigma)))
 }
 
 /// One chunk of [`Lanes`]: times `t`, data `y`, `S = e^{−σt} sinh u`, `C = e^{−σt} cosh u`.
@@ -256,16 +261,8 @@ impl Record33<'_> {
     #[target_feature(enable = "avx2,fma")]
     unsafe fn normal_avx2(&self, p: &Params33) -> Option<[f64; 10]> {
         use std::arch::x86_64::*;
-        let Params33 {
-            alpha,
-            sigma,
-            omega_a,
-        } = *p;
-        if !(alpha > 0.0 && sigma > 0.0 && omega_a > 0.0) {
-            return None;
-        }
-        let phi = (1.0 / alpha).asinh();
-        let (rate_a, rate_b) = (omega_a - sigma, -(omega_a + sigma));
+        let (phi, rate_a, rate_b) = phase_and_rates(p)?;
+        let alpha = p.alpha;
         let inv_root = 1.0 / (alpha * alpha + 1.0).sqrt();
         let (t_first, dt) = (self.t_first, self.dt);
         let y = self.normalized_current;

@@ -19,7 +19,8 @@
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use motor_model::{central_difference, steady_state, Effects, Input, MotorParams, Simulator};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
+use rayon::prelude::*;
 
 use crate::error::FitError;
 use crate::full_model::{
@@ -30,8 +31,10 @@ use crate::input_uncertainty::{
     estimate_level, fit_with_inputs, LevelEstimate, LevelPrior, Nuisance, NuisanceProblem,
     VoltageScale,
 };
-use crate::lm::{LeastSquares, LmSettings, NormalEquations};
-use crate::mechanical::{identify_inverse_model_pooled, AxisRecord, InverseModelSettings};
+use crate::lm::{half_squared_norm, LeastSquares, LmSettings, NormalEquations};
+use crate::mechanical::{
+    identify_inverse_model_pooled, motor_torque, AxisRecord, InverseModelSettings,
+};
 use crate::parameters::Parameters;
 use crate::plausibility::RecordFacts;
 use crate::signal::Butterworth;
@@ -478,28 +481,20 @@ impl OeProblem {
     }
 
     /// Residuals at `theta` and the columns `which` of their Jacobian in θ (forward
-    /// differences, the perturbed simulations run in parallel), on the RK4 step in use.
+    /// differences, the perturbed simulations run in parallel on rayon's pool, so that a fit
+    /// already running on that pool shares its threads), on the RK4 step in use.
     fn jacobian_columns(&self, theta: &[f64], which: &[usize]) -> Option<(Vec<f64>, DMatrix<f64>)> {
         let r0 = self.residuals(theta)?;
         let p = which.len();
-        let columns: Vec<Option<Vec<f64>>> = std::thread::scope(|scope| {
-            let handles: Vec<_> = which
-                .iter()
-                .map(|&j| {
-                    let r0 = &r0;
-                    scope.spawn(move || {
-                        let mut th = theta.to_vec();
-                        th[j] += FD_STEP;
-                        let r = self.residuals(&th)?;
-                        Some(r.iter().zip(r0).map(|(a, b)| (a - b) / FD_STEP).collect())
-                    })
-                })
-                .collect();
-            handles
-                .into_iter()
-                .map(|h| h.join().ok().flatten())
-                .collect()
-        });
+        let columns: Vec<Option<Vec<f64>>> = which
+            .par_iter()
+            .map(|&j| {
+                let mut th = theta.to_vec();
+                th[j] += FD_STEP;
+                let r = self.residuals(&th)?;
+                Some(r.iter().zip(&r0).map(|(a, b)| (a - b) / FD_STEP).collect())
+            })
+            .collect();
         let mut jac = DMatrix::zeros(r0.len(), p);
         for (j, col) in columns.into_iter().enumerate() {
             let col = col?;
@@ -515,21 +510,12 @@ impl LeastSquares for OeProblem {
     }
 
     fn cost(&self, theta: &[f64]) -> Option<f64> {
-        let r = self.residuals(theta)?;
-        Some(0.5 * r.iter().map(|v| v * v).sum::<f64>())
+        Some(half_squared_norm(&self.residuals(theta)?))
     }
 
     fn normal_equations(&self, theta: &[f64]) -> Option<NormalEquations> {
         let (r, jac) = self.jacobian(theta)?;
-        let r = DVector::from_vec(r);
-        let jtj = jac.tr_mul(&jac);
-        let jtr = jac.tr_mul(&r);
-        Some(NormalEquations {
-            jtj,
-            jtr,
-            cost: 0.5 * r.norm_squared(),
-            n_residuals: self.n_residuals,
-        })
+        Some(NormalEquations::from_jacobian(r, &jac))
     }
 }
 
@@ -639,6 +625,10 @@ pub(crate) fn predict_with_step_factor(
     effects: &Effects,
     step_factor: f64,
 ) -> Result<Vec<FittedChannel>, FitError> {
+    // Every sample is predicted, the masks set aside; still, they must align.
+    for (k, r) in records.iter().enumerate() {
+        crate::checks::check_aligned(&format!("record {}", k + 1), r.channels())?;
+    }
     let all: Vec<ExcitedRecord<'_>> = records
         .iter()
         .map(|r| ExcitedRecord {
@@ -743,16 +733,7 @@ pub(crate) fn output_error_sensitivity(
 /// Checks record `k` (0-based): aligned, finite channels of enough samples, a positive period.
 fn check_record(k: usize, rec: &ExcitedRecord<'_>) -> Result<(), FitError> {
     let label = format!("record {}", k + 1);
-    crate::checks::check_channels(
-        &label,
-        crate::checks::Channels {
-            current: rec.current,
-            speed: rec.speed,
-            position: rec.position,
-            exclude_current: rec.exclude_current,
-            exclude_speed: rec.exclude_speed,
-        },
-    )?;
+    crate::checks::check_channels(&label, rec.channels())?;
     if !(rec.dt.is_finite() && rec.dt > 0.0) {
         return Err(bad(
             label,
@@ -1228,7 +1209,7 @@ fn equation_error_estimate(
     // filtered on its own, samples at rest left out), so that its error is the real one.
     let torques: Vec<Vec<f64>> = records
         .iter()
-        .map(|rec| rec.current.iter().map(|i| k * i).collect())
+        .map(|rec| motor_torque(k, rec.current))
         .collect();
     let axis: Vec<AxisRecord<'_>> = per_record
         .iter()

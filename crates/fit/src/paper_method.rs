@@ -51,21 +51,18 @@ pub fn from_high_voltage(
         sigma,
         omega_a,
     } = fit;
-    for (name, v) in [
-        ("Em", e_m_volt),
-        ("Irm", i_rm_a),
-        ("Ωrm", omega_rm_rad_s),
-        ("α", alpha),
-        ("σ", sigma),
-        ("ωa", omega_a),
-    ] {
-        if !(v.is_finite() && v > 0.0) {
-            return Err(domain(
-                "Eqs. (34)-(44)",
-                format!("{name} = {v}: the method needs it finite and positive"),
-            ));
-        }
-    }
+    all_positive(
+        "Eqs. (34)-(44)",
+        &[
+            ("Em", e_m_volt),
+            ("Irm", i_rm_a),
+            ("Ωrm", omega_rm_rad_s),
+            ("α", alpha),
+            ("σ", sigma),
+            ("ωa", omega_a),
+        ],
+        "the method needs it finite and positive",
+    )?;
     let ratio = sigma / omega_a;
     if ratio <= 1.0 {
         return Err(domain(
@@ -95,20 +92,30 @@ pub fn from_high_voltage(
         j_kgm2,
         k_s,
     };
-    for (name, v) in [
-        ("L (38)", l_henry),
-        ("R (39)", r_ohm),
-        ("k (41)", k_nm_per_a),
-        ("f (42)", f_nms_per_rad),
-    ] {
-        if !(v.is_finite() && v > 0.0) {
-            return Err(domain(
-                "Eqs. (38)-(44)",
-                format!("{name} = {v}: the high-voltage test does not determine a physical motor (is the step high enough, Eq. (31)?)"),
-            ));
-        }
-    }
+    all_positive(
+        "Eqs. (38)-(44)",
+        &[
+            ("L (38)", l_henry),
+            ("R (39)", r_ohm),
+            ("k (41)", k_nm_per_a),
+            ("f (42)", f_nms_per_rad),
+        ],
+        "the high-voltage test does not determine a physical motor (is the step high enough, Eq. (31)?)",
+    )?;
     Ok(out)
+}
+
+/// The first of the named `values` that is not finite and positive, as the domain error of
+/// `equations` with `why` after its name and value.
+fn all_positive(
+    equations: &'static str,
+    values: &[(&str, f64)],
+    why: &str,
+) -> Result<(), FitError> {
+    match values.iter().find(|(_, v)| !(v.is_finite() && *v > 0.0)) {
+        Some((name, v)) => Err(domain(equations, format!("{name} = {v}: {why}"))),
+        None => Ok(()),
+    }
 }
 
 /// Eq. (37) exactly as printed: `(σ/ωa + √(α²+1)) / (ωa √((σ/ωa)² − 1))` \[s\]. Kept to show
@@ -406,6 +413,7 @@ pub fn speed_check_c8(
     start: Params33,
     settings: crate::lm::LmSettings,
 ) -> Result<SpeedCheck, FitError> {
+    crate::checks::check_aligned("high-voltage test", high.channels())?;
     let speed = high.speed.ok_or_else(|| FitError::BadData {
         series: "high-voltage speed".into(),
         reason: "the (C.8) check needs a speed or position channel".into(),

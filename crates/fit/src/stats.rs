@@ -37,11 +37,15 @@ pub fn uncertainty(normal: &NormalEquations) -> Option<Uncertainty> {
 /// heteroskedasticity- and autocorrelation-consistent estimate of the covariance of the score
 /// `Jᵀr` (Newey–West). Unlike [`uncertainty`] it stays honest when the residuals are correlated
 /// in time (noise that is not white: quantisation of a slowly moving signal, differentiated
-/// encoder counts, filtering). `normal` gives `JᵀJ` and the residual count.
+/// encoder counts, filtering). `normal` gives `JᵀJ` and the residual count; `None` when `S` is
+/// not of the shape of `JᵀJ`.
 pub fn sandwich_uncertainty(
     normal: &NormalEquations,
     score_cov: &DMatrix<f64>,
 ) -> Option<Uncertainty> {
+    if score_cov.shape() != normal.jtj.shape() {
+        return None;
+    }
     let dof = degrees_of_freedom(normal)?;
     let h_inv = inverse_jtj(normal)?;
     let small_sample = normal.n_residuals as f64 / dof as f64;
@@ -66,6 +70,9 @@ fn inverse_jtj(normal: &NormalEquations) -> Option<DMatrix<f64>> {
 /// The inverse of a symmetric matrix `M` with a positive diagonal, as `D (D M D)⁻¹ D`,
 /// `D = diag(M)^{-1/2}` (quantities of very different magnitudes keep the conditioning).
 pub(crate) fn scaled_inverse(m: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+    if !m.is_square() {
+        return None;
+    }
     let p = m.nrows();
     let d: Vec<f64> = (0..p)
         .map(|i| {

@@ -2,14 +2,25 @@
 //! lengths (current, speed, angle, exclusion masks, time and voltage) give an error, never a
 //! panic or an out-of-bounds index.
 
-use fit::{
-    check_step_test, electrical_equation, equation_error_start, fit_33, identify_full,
-    identify_inverse_model, identify_output_error, identify_paper, identify_step_pair, locate_step,
-    record_speed, speed_check_c8, steady_state_start, torque_constant, voltage_input,
-    ExcitedRecord, InverseModelSettings, LmSettings, Params33, Record33, StepInputs, StepMethod,
-    StepRecord, StepTest,
+use fit::diagnose::localise::{
+    localise, localise_with_floors, LocaliseSettings, ResidualChannel, ResidualRecord,
 };
-use motor_model::{Input, MotorParams, MotorState, StepResponse};
+use fit::diagnose::{
+    diagnose, diagnose_inverse, DiagnoseProgress, DiagnoseSettings, InverseDiagnoseSettings,
+};
+use fit::{
+    check_step_test, detect_initial_state, electrical_equation, encoder_speed,
+    equation_error_start, equation_error_start_with_initial_states, fit_33, identify_feedforward,
+    identify_full, identify_full_with_inputs, identify_inverse_model,
+    identify_inverse_model_pooled, identify_output_error, identify_output_error_with_effects,
+    identify_output_error_with_initial_states, identify_output_error_with_inputs,
+    identify_output_error_with_inputs_and_effects, identify_paper, identify_step_pair, locate_step,
+    locate_step_with, predict_output_error, record_speed, speed_check_c8, steady_state_start,
+    torque_constant, voltage_input, voltage_levels, AxisRecord, Channel, ExcitedRecord,
+    FeedforwardSettings, InitialState, InverseModelSettings, LmSettings, Params33, Record33,
+    SpeedRecord, StepInputs, StepMethod, StepRecord, StepTest,
+};
+use motor_model::{Effects, Input, MotorParams, MotorState, StepResponse};
 use proptest::prelude::*;
 
 /// A noise-free 40 V step of the paper's motor, 2 s at 1 kHz: current, speed, angle.
@@ -85,7 +96,7 @@ proptest! {
                 .map(|e| e.to_string()),
         ];
         if used_misaligned {
-            for r in &results[..3] {
+            for r in &results {
                 prop_assert!(r.is_some());
             }
         }
@@ -97,15 +108,7 @@ proptest! {
             }
         }
         let input = Input::Step { volts: 40.0, at_s: 0.0 };
-        let record = ExcitedRecord {
-            input: &input,
-            dt: 1e-3,
-            current: &current,
-            speed: use_speed.then_some(&speed[..]),
-            position: use_angle.then_some(&angle[..]),
-            exclude_current: use_masks.then_some(&mask_i[..]),
-            exclude_speed: use_masks.then_some(&mask_w[..]),
-        };
+        let record = excited(&input, &test);
         let oe = [
             electrical_equation(&[record], 0.1).err().map(|e| e.to_string()),
             equation_error_start(&[record]).err().map(|e| e.to_string()),
@@ -136,5 +139,143 @@ proptest! {
         }
         let normalized: Vec<f64> = current.iter().map(|c| c / 53.57).collect();
         let _ = fit_33(&Record33 { t_first: 0.0, dt: 1e-3, normalized_current: &normalized }, Params33 { alpha: 1.0, sigma: 1.0, omega_a: 1.0 }, settings);
+    }
+}
+
+/// The record of any excitation with the channels of `test`, driven by `input`.
+fn excited<'a>(input: &'a Input, test: &StepTest<'a>) -> ExcitedRecord<'a> {
+    ExcitedRecord {
+        input,
+        dt: test.dt,
+        current: test.current,
+        speed: test.speed,
+        position: test.position,
+        exclude_current: test.exclude_current,
+        exclude_speed: test.exclude_speed,
+    }
+}
+
+/// A length unlike `n` (≥ 1) by `(choice, amount)` (amount ≥ 1): shorter, longer or empty.
+fn other_length(n: usize, (choice, amount): (u8, usize)) -> usize {
+    match choice {
+        0 => n.saturating_sub(amount),
+        1 => n + amount,
+        _ => 0,
+    }
+}
+
+/// Which channel of a record is given the wrong length.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Off {
+    Speed,
+    Angle,
+    Mask,
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+
+    /// The entry points the test above does not reach (the variants with inputs, effects or
+    /// initial states, the predictions, the initial-state detection, the voltage-and-speed fit,
+    /// the pooled inverse model, the step location with a quantum, the residual localisation
+    /// and both diagnoses), each given one channel of the wrong length: an error every time.
+    #[test]
+    fn every_other_entry_point_refuses_a_misaligned_channel(
+        n in 50usize..2001,
+        change in (0u8..3, 1usize..50),
+        off in prop_oneof![Just(Off::Speed), Just(Off::Angle), Just(Off::Mask)],
+    ) {
+        let (i, w, th) = channels();
+        let m = other_length(n, change);
+        let len = |channel: Off| if channel == off { m } else { n };
+        let grow = |v: &[f64], k: usize| -> Vec<f64> {
+            (0..k).map(|j| v.get(j).copied().unwrap_or(0.0)).collect()
+        };
+        let current = grow(&i, n);
+        let speed = grow(&w, len(Off::Speed));
+        let angle = grow(&th, len(Off::Angle));
+        let mask = vec![false; len(Off::Mask)];
+        let input = Input::Step { volts: 40.0, at_s: 0.0 };
+        let settings = LmSettings { max_iters: 3, ..LmSettings::default() };
+        let start = MotorParams::paper();
+        let none = Effects::none();
+        let test = StepTest {
+            volts: 40.0,
+            t_first: 0.0,
+            dt: 1e-3,
+            current: &current,
+            speed: Some(&speed),
+            position: (off == Off::Angle).then_some(&angle[..]),
+            exclude_current: None,
+            exclude_speed: Some(&mask),
+        };
+        let record = excited(&input, &test);
+        prop_assert!(identify_full_with_inputs(&[test], &[StepInputs::default()], &start, settings).is_err());
+        prop_assert!(detect_initial_state(&record).is_err());
+        prop_assert!(equation_error_start_with_initial_states(&[record], &[InitialState::Rest]).is_err());
+        prop_assert!(identify_output_error_with_effects(&[record], &start, &none, settings).is_err());
+        prop_assert!(identify_output_error_with_inputs(&[record], &[Vec::new()], &start, settings).is_err());
+        prop_assert!(identify_output_error_with_inputs_and_effects(&[record], &[Vec::new()], &start, &none, settings).is_err());
+        prop_assert!(identify_output_error_with_initial_states(&[record], &[], &[InitialState::Free], &start, &none, settings).is_err());
+        prop_assert!(predict_output_error(&[record], &start, &none).is_err());
+
+        // A column of time beside a voltage of another length.
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * 1e-3).collect();
+        let volts = vec![40.0; m];
+        prop_assert!(voltage_levels(&t, &volts, Some(0.04)).is_err());
+        prop_assert!(locate_step_with(&t, &volts, Some(0.04)).is_err());
+        // The encoder speed takes the samples both columns have: no panic, no longer than either.
+        prop_assert!(encoder_speed(&t, &angle).len() <= n.min(angle.len()));
+
+        // The voltage-and-speed fit: a speed or angle and its mask of different lengths.
+        let full_mask = vec![false; n];
+        let speed_record = SpeedRecord {
+            input: &input,
+            dt: 1e-3,
+            speed: (off != Off::Angle).then_some(&speed[..]),
+            position: (off == Off::Angle).then_some(&angle[..]),
+            exclude: Some(if off == Off::Mask { &mask[..] } else { &full_mask[..] }),
+            priors: &[],
+        };
+        prop_assert!(identify_feedforward(&[speed_record], FeedforwardSettings::default()).is_err());
+
+        // The inverse model: a torque and a position of different lengths.
+        let torque: Vec<f64> = current.iter().map(|c| 0.15 * c).collect();
+        let axis = AxisRecord { dt: 1e-3, torque: &torque, position: &grow(&th, m) };
+        prop_assert!(identify_inverse_model_pooled(&[axis], InverseModelSettings::default()).is_err());
+        prop_assert!(diagnose_inverse(&[axis], &[], &["axis"], &InverseDiagnoseSettings::default()).is_err());
+
+        // The localisation: a channel's measurement and model, or a record's signals, of
+        // different lengths.
+        let voltage = vec![40.0; n];
+        let model = grow(&i, m);
+        let residual = ResidualRecord {
+            name: "record",
+            dt: 1e-3,
+            voltage: &voltage,
+            current: Some(&current),
+            speed: Some(&speed),
+            angle: None,
+            channels: vec![ResidualChannel { kind: Channel::Current, measured: &current, model: &model }],
+        };
+        prop_assert!(localise(std::slice::from_ref(&residual), &LocaliseSettings::default()).is_err());
+        prop_assert!(localise_with_floors(&[residual], &[vec![1e-3]], &LocaliseSettings::default()).is_err());
+
+        // The diagnosis, on a misaligned training or validation record.
+        let quiet = |_: DiagnoseProgress| {};
+        let aligned_speed = grow(&w, n);
+        let aligned = ExcitedRecord { speed: Some(&aligned_speed), position: None, exclude_speed: None, ..record };
+        prop_assert!(diagnose(&[record], &[], &["record"], &start, &DiagnoseSettings::default(), &quiet).is_err());
+        prop_assert!(diagnose(&[aligned], &[record], &["record", "validation"], &start, &DiagnoseSettings::default(), &quiet).is_err());
+
+        // Aligned channels, but one entry too many of what goes with each record: the level
+        // priors, the step inputs, the initial states.
+        let aligned_test = StepTest { speed: Some(&aligned_speed), position: None, exclude_speed: None, ..test };
+        let two_inputs = [StepInputs::default(), StepInputs::default()];
+        prop_assert!(identify_full_with_inputs(&[aligned_test], &two_inputs, &start, settings).is_err());
+        prop_assert!(identify_output_error_with_inputs(&[aligned], &[Vec::new(), Vec::new()], &start, settings).is_err());
+        let two_states = [InitialState::Rest, InitialState::Rest];
+        prop_assert!(equation_error_start_with_initial_states(&[aligned], &two_states).is_err());
+        prop_assert!(identify_output_error_with_initial_states(&[aligned], &[], &two_states, &start, &none, settings).is_err());
     }
 }

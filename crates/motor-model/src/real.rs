@@ -34,6 +34,18 @@ pub trait Real:
     fn cosh(self) -> Self;
 }
 
+/// The methods of [`Real`] named, each calling `f64`'s own method of that name.
+macro_rules! forward_to_f64 {
+    ($($name:ident),*) => {
+        $(
+            #[inline(always)]
+            fn $name(self) -> Self {
+                f64::$name(self)
+            }
+        )*
+    };
+}
+
 impl Real for f64 {
     #[inline(always)]
     fn cst(x: f64) -> Self {
@@ -43,38 +55,7 @@ impl Real for f64 {
     fn value(self) -> f64 {
         self
     }
-    #[inline(always)]
-    fn exp(self) -> Self {
-        f64::exp(self)
-    }
-    #[inline(always)]
-    fn exp_m1(self) -> Self {
-        f64::exp_m1(self)
-    }
-    #[inline(always)]
-    fn ln_1p(self) -> Self {
-        f64::ln_1p(self)
-    }
-    #[inline(always)]
-    fn sqrt(self) -> Self {
-        f64::sqrt(self)
-    }
-    #[inline(always)]
-    fn sin(self) -> Self {
-        f64::sin(self)
-    }
-    #[inline(always)]
-    fn cos(self) -> Self {
-        f64::cos(self)
-    }
-    #[inline(always)]
-    fn sinh(self) -> Self {
-        f64::sinh(self)
-    }
-    #[inline(always)]
-    fn cosh(self) -> Self {
-        f64::cosh(self)
-    }
+    forward_to_f64!(exp, exp_m1, ln_1p, sqrt, sin, cos, sinh, cosh);
 }
 
 /// A value with its partial derivatives with respect to `N` inputs (forward-mode automatic

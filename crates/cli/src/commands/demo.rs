@@ -123,8 +123,7 @@ pub fn run(a: &Settings) -> Result<()> {
     diagnosis_story()?;
 
     if let Some(dir) = &a.out {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
+        crate::output::create_dir(dir)?;
         for (e, input, trace) in records {
             let record = motor_model::MeasurementModel::default().apply(&trace)?;
             let path = dir.join(format!("paper_{e}V.csv"));

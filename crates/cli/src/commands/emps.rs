@@ -151,8 +151,7 @@ pub fn run(a: &Settings) -> Result<()> {
     let near_fraction = without.fraction_on;
 
     if let Some(dir) = &a.plot {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
+        crate::output::create_dir(dir)?;
         let t_val = column(&val, "time_s", &val_name)?;
         let to_mm =
             |q: &[f64]| -> Vec<f64> { qm.iter().zip(q).map(|(m, s)| 1e3 * (m - s)).collect() };

@@ -547,14 +547,12 @@ fn localise_rows(
         .iter()
         .map(|&(a, b)| (a..b).map(|i| (s.torque[i] - residual[i]) / k).collect())
         .collect();
-    let fallback: Vec<String> = (0..per_record.len())
-        .map(|r| format!("record {}", r + 1))
-        .collect();
+    let shown = super::record_names(names, per_record.len());
     let records: Vec<ResidualRecord<'_>> = per_record
         .iter()
         .enumerate()
         .map(|(r, &(a, b))| ResidualRecord {
-            name: names.get(r).copied().unwrap_or(fallback[r].as_str()),
+            name: &shown[r],
             dt: s.dt_row,
             // The current is the input of a current-driven axis.
             voltage: &currents[r],
@@ -944,14 +942,7 @@ fn run_stage(
     let mut next = None;
     for r in refits {
         let mut c = r.report;
-        if let Some(rank) = verdict.ranked.iter().find(|x| x.name == c.name) {
-            c.significant = rank.significant;
-            c.p_value = rank.p_value;
-            c.heldout_p_value = rank.heldout_p_value;
-            if rank.significant {
-                c.assessment = Assessment::Significant;
-            }
-        }
+        c.take_rank(&verdict);
         if verdict.verdict.as_deref() == Some(c.name) {
             next = r.chosen;
         }

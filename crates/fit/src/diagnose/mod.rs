@@ -45,3 +45,15 @@ pub use run::{
     diagnose, Assessment, CandidateReport, DiagnoseError, DiagnoseProgress, DiagnoseSettings,
     Diagnosis, EffectParam, ParamShift, Stage,
 };
+
+/// The name of each of `n` records in reports: `names[k]`, or `record k+1` (counted from 1)
+/// where `names` has none.
+pub(crate) fn record_names(names: &[&str], n: usize) -> Vec<String> {
+    (0..n)
+        .map(|k| {
+            names
+                .get(k)
+                .map_or_else(|| format!("record {}", k + 1), |s| s.to_string())
+        })
+        .collect()
+}

@@ -240,6 +240,21 @@ pub struct CandidateReport {
 }
 
 impl CandidateReport {
+    /// Takes the significance and the p-values of this candidate's row of `verdict` (its
+    /// assessment becomes [`Assessment::Significant`] where significant); unranked, unchanged.
+    pub(crate) fn take_rank(&mut self, verdict: &Verdict) {
+        if let Some(r) = verdict.ranked.iter().find(|r| r.name == self.name) {
+            self.significant = r.significant;
+            self.p_value = r.p_value;
+            self.heldout_p_value = r.heldout_p_value;
+            if r.significant {
+                self.assessment = Assessment::Significant;
+            }
+        }
+    }
+}
+
+impl CandidateReport {
     /// Whether it was refitted (its refit's figures are set).
     pub fn refitted(&self) -> bool {
         self.motor.is_some()
@@ -838,6 +853,11 @@ pub fn diagnose(
         }
         .into());
     }
+    // The channels and masks must align before the held-out blocks are merged into the masks.
+    let shown = super::record_names(names, records.len() + validation.len());
+    for (r, name) in records.iter().chain(validation).zip(&shown) {
+        crate::checks::check_aligned(name, r.channels())?;
+    }
     // The training records: whole, or with their held-out blocks excluded.
     let masks = validation.is_empty().then(|| split(records, settings));
     let train: Vec<ExcitedRecord<'_>> = match &masks {
@@ -1013,14 +1033,12 @@ fn localise_all(
             })
         })
         .collect();
-    let fallback: Vec<String> = (0..all.len())
-        .map(|k| format!("record {}", k + 1))
-        .collect();
+    let shown = super::record_names(names, all.len());
     let records: Vec<ResidualRecord<'_>> = all
         .iter()
         .enumerate()
         .map(|(k, r)| ResidualRecord {
-            name: names.get(k).copied().unwrap_or(fallback[k].as_str()),
+            name: &shown[k],
             dt: r.dt,
             voltage: &voltages[k],
             current: Some(r.current),
@@ -1317,14 +1335,7 @@ fn run_stage(
     let verdict = rank_candidates(&scores, &settings.verdict);
     let mut candidates: Vec<CandidateReport> = results.into_iter().map(|(c, _, _)| c).collect();
     for c in &mut candidates {
-        if let Some(r) = verdict.ranked.iter().find(|r| r.name == c.name) {
-            c.significant = r.significant;
-            c.p_value = r.p_value;
-            c.heldout_p_value = r.heldout_p_value;
-            if r.significant {
-                c.assessment = Assessment::Significant;
-            }
-        }
+        c.take_rank(&verdict);
     }
     Stage {
         base: base.effects.list().iter().map(Effect::name).collect(),

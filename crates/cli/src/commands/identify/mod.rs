@@ -441,8 +441,7 @@ fn run_steady(a: &Settings, paths: &[PathBuf], r: f64, k: f64) -> Result<()> {
         println!("Ts = k b / a = {:.6} N·m  (Eq. (9))", fit.ts_nm);
     }
     if let Some(dir) = &a.plot {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
+        crate::output::create_dir(dir)?;
         let (lo, hi) = fit
             .points
             .iter()
@@ -552,8 +551,7 @@ fn run_current(a: &Settings, paths: &[PathBuf]) -> Result<()> {
         Axis::Linear => fit::MECHANICAL_UNITS_LINEAR,
     };
     if let Some(dir) = &a.plot {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
+        crate::output::create_dir(dir)?;
         let Some(f) = fit.fitted.first() else {
             anyhow::bail!("the inverse model returned no fitted samples");
         };
