@@ -26,6 +26,14 @@ use clap::Parser;
 
 use args::{Cli, Command};
 
+/// mimalloc rather than the system's malloc: it backs large blocks with transparent huge
+/// pages, so that a record's columns (400 kB each for 50,000 samples) fault in a few 2 MiB
+/// pages instead of a hundred 4 KiB pages each, and it reuses freed blocks without handing
+/// them back to the system. `identify --method paper` on two 50,001-sample records: 1,920
+/// page faults with glibc's malloc, about 310 with mimalloc (see the README).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 /// Exit code for input the user must fix (bad options, unreadable or invalid files).
 const EXIT_BAD_INPUT: u8 = 2;
 /// Exit code for any other failure (I/O while writing, internal errors).
@@ -65,26 +73,6 @@ fn quiet_broken_pipe() {
     // SAFETY: setting a signal's disposition to SIG_DFL at start-up, before any thread exists.
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
-    }
-}
-
-/// Largest allocation \[bytes\] that glibc's malloc serves from its heap rather than by a
-/// mapping of its own (its ceiling on 64-bit targets, 32 MiB).
-#[cfg(all(target_os = "linux", target_env = "gnu"))]
-const HEAP_ALLOCATION_MAX_BYTES: libc::c_int = 32 << 20;
-
-/// Has glibc's malloc keep freed memory for the next allocation instead of handing it back to
-/// the system: by default each column of a record (400 kB for 50,000 samples) gets a mapping
-/// of its own, whose pages fault in one by one when first written and are unmapped when it
-/// is freed, so that every new column of the same size pays both again. Served from the heap
-/// and never trimmed, freed pages are written again without a fault.
-fn keep_freed_memory() {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: `mallopt` only sets malloc's thresholds; called at start-up, before any thread
-    // exists or anything is allocated by another thread.
-    unsafe {
-        libc::mallopt(libc::M_MMAP_THRESHOLD, HEAP_ALLOCATION_MAX_BYTES);
-        libc::mallopt(libc::M_TRIM_THRESHOLD, libc::c_int::MAX);
     }
 }
 
@@ -139,7 +127,6 @@ fn declared_outputs(command: &Command) -> Vec<output::Declared> {
 
 fn main() -> ExitCode {
     quiet_broken_pipe();
-    keep_freed_memory();
     let cli = Cli::parse();
     let outcome =
         output::check(&declared_outputs(&cli.command)).and_then(|()| match cli.command {
