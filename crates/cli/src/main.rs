@@ -26,6 +26,14 @@ use clap::Parser;
 
 use args::{Cli, Command};
 
+/// mimalloc rather than the system's malloc: it backs large blocks with transparent huge
+/// pages, so that a record's columns (400 kB each for 50,000 samples) fault in a few 2 MiB
+/// pages instead of a hundred 4 KiB pages each, and it reuses freed blocks without handing
+/// them back to the system. `identify --method paper` on two 50,001-sample records: 1,920
+/// page faults with glibc's malloc, about 310 with mimalloc (see the README).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 /// Exit code for input the user must fix (bad options, unreadable or invalid files).
 const EXIT_BAD_INPUT: u8 = 2;
 /// Exit code for any other failure (I/O while writing, internal errors).

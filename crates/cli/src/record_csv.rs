@@ -272,6 +272,10 @@ const MAX_LINE_BYTES: usize = 64 * 1024;
 /// as they fill): 16 M rows of 8-byte values.
 const MAX_RESERVED_ROWS: usize = 1 << 24;
 
+/// Fewest rows in the reader's buffer from which [`TableParser::reserve_rows`] takes their
+/// mean length.
+const MIN_SAMPLED_ROWS: usize = 64;
+
 /// Whether `b` is ASCII white space as [`str::trim`] sees it (`char::is_whitespace`: tab, line
 /// feed, vertical tab, form feed, carriage return, space).
 fn is_space(b: u8) -> bool {
@@ -325,8 +329,14 @@ impl TableParser {
         )
     }
 
-    /// Reads one line (without its line break; `newline` whether it had one).
-    fn line(&mut self, bytes: &[u8], newline: bool) -> std::result::Result<(), (usize, String)> {
+    /// Reads one line (without its line break; `newline` whether it had one); `ahead` is the
+    /// input from the line's start to the end of the reader's buffer (for [`Self::reserve_rows`]).
+    fn line(
+        &mut self,
+        bytes: &[u8],
+        newline: bool,
+        ahead: &[u8],
+    ) -> std::result::Result<(), (usize, String)> {
         if bytes.len() > MAX_LINE_BYTES {
             return Err(self.too_long());
         }
@@ -334,7 +344,7 @@ impl TableParser {
         // A data row of plain numbers is read straight from the bytes; anything else (a
         // comment, a blank line, a field that is not a finite number, a count of fields other
         // than the header's) takes the checks of `text_line`, which give every message.
-        if self.rows_from_bytes && !self.table.names.is_empty() && self.numeric_row(bytes) {
+        if self.rows_from_bytes && !self.table.names.is_empty() && self.numeric_row(bytes, ahead) {
             self.saw_newline = newline;
             return Ok(());
         }
@@ -347,9 +357,9 @@ impl TableParser {
     /// number where it starts and says where it ends; it reads the decimal grammar of
     /// [`str::parse`] (both correctly rounded), so a field it reads whole is a field the text
     /// path reads, to the same value.
-    fn numeric_row(&mut self, bytes: &[u8]) -> bool {
+    fn numeric_row(&mut self, bytes: &[u8], ahead: &[u8]) -> bool {
         if self.table.lines.is_empty() {
-            self.reserve_rows(bytes.len());
+            self.reserve_rows(bytes.len(), ahead);
         }
         let columns = &mut self.table.columns;
         let mut rest = bytes;
@@ -383,11 +393,23 @@ impl TableParser {
         true
     }
 
-    /// Reserves room for the rows of the input, estimated from the length of the first one
-    /// (later rows are rarely shorter than the first, at rest): one allocation per column
-    /// instead of a doubling series of copies.
-    fn reserve_rows(&mut self, first_row_bytes: usize) {
-        let rows = (self.size_hint / (first_row_bytes + 1) + 16).min(MAX_RESERVED_ROWS);
+    /// Reserves room for the rows of the input: one allocation per column instead of a
+    /// doubling series of copies. The count is estimated from the mean length of the rows in
+    /// `ahead` (the input from the first row to the end of the reader's buffer) plus 1/64,
+    /// else, with fewer than [`MIN_SAMPLED_ROWS`] rows there, from the length of the first
+    /// row (later rows are rarely shorter than the first, at rest). Room reserved and never
+    /// written costs little, but not nothing: an allocator that backs large blocks with huge
+    /// pages clears every huge page a block starts, written or not.
+    fn reserve_rows(&mut self, first_row_bytes: usize, ahead: &[u8]) {
+        let span = memchr::memrchr(b'\n', ahead).map_or(0, |i| i + 1);
+        let breaks = memchr::memchr_iter(b'\n', &ahead[..span]).count();
+        let rows = if breaks >= MIN_SAMPLED_ROWS {
+            let rows = self.size_hint / (span / breaks);
+            rows + rows / 64 + 16
+        } else {
+            self.size_hint / (first_row_bytes + 1) + 16
+        }
+        .min(MAX_RESERVED_ROWS);
         for column in &mut self.table.columns {
             column.reserve(rows);
         }
@@ -534,10 +556,10 @@ fn parse_with(
         let mut rest = chunk;
         while let Some(i) = memchr::memchr(b'\n', rest) {
             if partial.is_empty() {
-                parser.line(&rest[..i], true)?;
+                parser.line(&rest[..i], true, rest)?;
             } else {
                 partial.extend_from_slice(&rest[..i]);
-                parser.line(&partial, true)?;
+                parser.line(&partial, true, &partial)?;
                 partial.clear();
             }
             rest = &rest[i + 1..];
@@ -549,7 +571,7 @@ fn parse_with(
         reader.consume(filled);
     }
     if !partial.is_empty() {
-        parser.line(&partial, false)?;
+        parser.line(&partial, false, &partial)?;
     }
     parser.finish()
 }

@@ -80,6 +80,7 @@ pub fn record_at(
         format!("simulated {volts} V record (seed {seed})"),
         rec,
         lsb(0),
+        None,
     )?;
     step.inputs.current_lsb_a = lsb(1).unwrap_or(0.0);
     Ok(step)

@@ -6,13 +6,13 @@ use std::path::Path;
 
 use anyhow::Result;
 use fit::{
-    current_adc_steps, detect_initial_state, equation_error_start_with_initial_states,
+    current_adc_steps, detect_initial_state, detect_rest, equation_error_start_with_initial_states,
     identify_feedforward, identify_output_error_with_initial_states, identify_step_pair,
     judge_clipping, locate_step_with, record_speed, voltage_input, voltage_levels, AxisRecord,
     ClippingVerdict, CurrentChannel, DetectedInitialState, ExcitedRecord, FeedforwardFit,
     FeedforwardSettings, FullFit, InitialState, LevelPrior, LmSettings, MeasuredChannels,
-    RecordChannel, SpeedRecord, StepInputs, StepMethod, StepPairIdentification, StepRecord,
-    StepTest,
+    RecordChannel, SpeedRecord, StartChannels, StepInputs, StepMethod, StepPairIdentification,
+    StepRecord, StepTest,
 };
 use motor_model::{Effects, Input, MotorParams, Record};
 
@@ -179,10 +179,9 @@ fn read_step(path: &Path, map: &ColumnMap) -> (Vec<String>, Result<LoadedStep>) 
     let step = masks.and_then(|masks| {
         let label = file_lines(&shown, &loaded.lines);
         let initial = initial_state_of(&loaded.record);
-        let channels = measured_channels(&loaded.record, loaded.current_lsb);
-        let mut step = step_from_record_with(label, loaded.record, loaded.voltage_lsb)?;
+        let mut step =
+            step_from_record_with(label, loaded.record, loaded.voltage_lsb, loaded.current_lsb)?;
         step.initial = initial;
-        step.channels = channels;
         step.inputs.current_lsb_a = loaded.current_lsb.unwrap_or(0.0);
         step.path = shown;
         let from = loaded.lines.len() - step.current.len();
@@ -197,15 +196,25 @@ fn read_step(path: &Path, map: &ColumnMap) -> (Vec<String>, Result<LoadedStep>) 
 }
 
 /// How a whole record starts ([`fit::detect_initial_state`]), `None` where its first samples
-/// cannot tell.
+/// cannot tell. The voltage waveform, which only a record that does not start at rest needs,
+/// is rebuilt only for such a record ([`fit::detect_rest`] first).
 fn initial_state_of(rec: &Record) -> Option<DetectedInitialState> {
-    let input = voltage_input(&rec.t, &rec.voltage).ok()?;
-    detect_initial_state(&ExcitedRecord {
-        input: &input,
+    let channels = StartChannels {
         dt: motor_model::mean_period(&rec.t),
         current: &rec.current,
         speed: rec.speed.as_deref(),
         position: rec.position.as_deref(),
+    };
+    if let Some(rest) = detect_rest(&channels).ok()? {
+        return Some(rest);
+    }
+    let input = voltage_input(&rec.t, &rec.voltage).ok()?;
+    detect_initial_state(&ExcitedRecord {
+        input: &input,
+        dt: channels.dt,
+        current: channels.current,
+        speed: channels.speed,
+        position: channels.position,
         exclude_current: None,
         exclude_speed: None,
     })
@@ -216,15 +225,17 @@ fn initial_state_of(rec: &Record) -> Option<DetectedInitialState> {
 /// (for the paper method's Ωrm) comes from the `position` column, else the `speed` column
 /// ([`fit::record_speed`]); the full fit uses the encoder angle where there is one.
 pub fn step_from_record(shown: String, cols: Record) -> Result<LoadedStep> {
-    step_from_record_with(shown, cols, None)
+    step_from_record_with(shown, cols, None, None)
 }
 
 /// [`step_from_record`] with the voltage's ADC step `voltage_lsb` \[V\] if known (a noise-free
-/// quantised step height is known only to ±½ step).
+/// quantised step height is known only to ±½ step), and the current's, `current_lsb` \[A\],
+/// for the record's [`MeasuredChannels`] (else found from the column's values).
 pub fn step_from_record_with(
     shown: String,
     cols: Record,
     voltage_lsb: Option<f64>,
+    current_lsb: Option<f64>,
 ) -> Result<LoadedStep> {
     let loc = locate_step_with(&cols.t, &cols.voltage, voltage_lsb)
         .map_err(|e| BadInput(format!("{shown}: {e}")))?;
@@ -241,7 +252,7 @@ pub fn step_from_record_with(
         v
     };
     let speed = record_speed(&cols.t, cols.speed.as_deref(), cols.position.as_deref());
-    let channels = measured_channels(&cols, None);
+    let channels = measured_channels(&cols, current_lsb);
     Ok(LoadedStep {
         channels,
         label: shown.clone(),

@@ -97,6 +97,122 @@ fn speed_at_start(angle: &[f64], dt: f64) -> Option<(f64, f64)> {
     Some((beta[1], sigma * inv[(1, 1)].sqrt())).filter(|(w, s)| w.is_finite() && s.is_finite())
 }
 
+/// The channels of a record that tell whether it starts at rest ([`detect_rest`]): no input
+/// is needed for that.
+#[derive(Debug, Clone, Copy)]
+pub struct StartChannels<'a> {
+    /// Sample period \[s\].
+    pub dt: f64,
+    /// Armature current \[A\].
+    pub current: &'a [f64],
+    /// Speed \[rad/s\] measured directly (tachometer), if any. Not used when `position` is given.
+    pub speed: Option<&'a [f64]>,
+    /// Encoder angle \[rad\] (any offset), if measured.
+    pub position: Option<&'a [f64]>,
+}
+
+impl<'a> ExcitedRecord<'a> {
+    /// The record's channels without its input, for [`detect_rest`].
+    pub fn start_channels(&self) -> StartChannels<'a> {
+        StartChannels {
+            dt: self.dt,
+            current: self.current,
+            speed: self.speed,
+            position: self.position,
+        }
+    }
+}
+
+/// What the rest test and the flatness test of [`detect_initial_state`] read off a record's
+/// channels.
+struct StartLevels<'a> {
+    current: &'a [f64],
+    /// The tachometer's speed, or the encoder angle's central difference \[rad/s\].
+    speed: Vec<f64>,
+    /// Noise levels of the current \[A\] and the speed \[rad/s\] ([`noise_std`]).
+    noise: (f64, f64),
+    /// Floors of the current \[A\] and the speed \[rad/s\]: [`FLOOR_FRACTION`] of the largest
+    /// |value|.
+    floor: (f64, f64),
+    /// The speed at the first sample \[rad/s\] and its standard error ([`speed_at_start`] with
+    /// an encoder).
+    start_speed: (f64, f64),
+}
+
+impl<'a> StartLevels<'a> {
+    /// The levels of `record`; an error for fewer than 3 samples, no speed nor position, or
+    /// channels not finite or not of one length.
+    fn of(record: &StartChannels<'a>) -> Result<Self, FitError> {
+        let current = record.current;
+        let n = current.len();
+        let bad = |reason: String| FitError::BadData {
+            series: "record".into(),
+            reason,
+        };
+        if n < 3 {
+            return Err(bad(format!("{n} samples: too few to tell how it starts")));
+        }
+        let speed: Vec<f64> = match (record.position, record.speed) {
+            (Some(angle), _) => {
+                let times: Vec<f64> = (0..angle.len()).map(|i| i as f64 * record.dt).collect();
+                central_difference(&times, angle)
+            }
+            (None, Some(w)) => w.to_vec(),
+            (None, None) => {
+                return Err(bad(
+                    "neither speed nor position: the initial speed cannot be seen".into(),
+                ))
+            }
+        };
+        if speed.len() != n || current.iter().chain(&speed).any(|v| !v.is_finite()) {
+            return Err(bad(
+                "the current and speed must be finite and of one length".into(),
+            ));
+        }
+        let peak = |y: &[f64]| y.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let noise = (noise_std(current), noise_std(&speed));
+        let floor = (
+            FLOOR_FRACTION * peak(current),
+            FLOOR_FRACTION * peak(&speed),
+        );
+        let w0 = speed[0];
+        let start_speed = match record.position {
+            Some(angle) => speed_at_start(angle, record.dt).unwrap_or((w0, noise.1)),
+            None => (w0, noise.1),
+        };
+        Ok(StartLevels {
+            current,
+            speed,
+            noise,
+            floor,
+            start_speed,
+        })
+    }
+
+    /// At rest (with the reason) when the current and the speed at the first sample are 0
+    /// within [`REST_SIGMAS`] noise levels and the floors; `None` otherwise.
+    fn rest(&self) -> Option<DetectedInitialState> {
+        let (c0, w0) = (self.current[0], self.speed[0]);
+        let (w_start, sw_start) = self.start_speed;
+        (c0.abs() <= REST_SIGMAS * self.noise.0 + self.floor.0
+            && w_start.abs() <= REST_SIGMAS * sw_start + self.floor.1)
+            .then(|| DetectedInitialState {
+                state: InitialState::Rest,
+                reason: format!(
+                    "current {c0:.4e} A and speed {w0:.4e} rad/s at the first sample: at rest"
+                ),
+            })
+    }
+}
+
+/// The rest test of [`detect_initial_state`] alone, which needs no input: `Some` (at rest)
+/// when the current and the speed at the first sample are 0 within 5 noise levels and 0.5 % of
+/// their largest |value|, `None` when the record starts moving (then [`detect_initial_state`]
+/// tells steady from free, the same way). Errors as [`detect_initial_state`]'s.
+pub fn detect_rest(record: &StartChannels<'_>) -> Result<Option<DetectedInitialState>, FitError> {
+    Ok(StartLevels::of(record)?.rest())
+}
+
 /// The initial state `record` shows: at rest when the current and the speed at the first
 /// sample are 0 within 5 noise levels ([`noise_std`]) and 0.5 % of their largest |value| (with
 /// an encoder, the speed at the first sample is the slope at t = 0 of a parabola fitted to the
@@ -108,53 +224,21 @@ fn speed_at_start(angle: &[f64], dt: f64) -> Option<(f64, f64)> {
 /// within 4 standard errors and 0.5 % of the largest |value|), else free. The speed is the
 /// tachometer's, or the encoder angle's central difference.
 pub fn detect_initial_state(record: &ExcitedRecord<'_>) -> Result<DetectedInitialState, FitError> {
-    let current = record.current;
-    let n = current.len();
-    let bad = |reason: String| FitError::BadData {
-        series: "record".into(),
-        reason,
-    };
-    if n < 3 {
-        return Err(bad(format!("{n} samples: too few to tell how it starts")));
-    }
     crate::checks::check_aligned("record", record.channels())?;
-    let speed: Vec<f64> = match (record.position, record.speed) {
-        (Some(angle), _) => {
-            let times: Vec<f64> = (0..angle.len()).map(|i| i as f64 * record.dt).collect();
-            central_difference(&times, angle)
-        }
-        (None, Some(w)) => w.to_vec(),
-        (None, None) => {
-            return Err(bad(
-                "neither speed nor position: the initial speed cannot be seen".into(),
-            ))
-        }
-    };
-    if speed.len() != n || current.iter().chain(&speed).any(|v| !v.is_finite()) {
-        return Err(bad(
-            "the current and speed must be finite and of one length".into(),
-        ));
+    let levels = StartLevels::of(&record.start_channels())?;
+    if let Some(rest) = levels.rest() {
+        return Ok(rest);
     }
-    let peak = |y: &[f64]| y.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let (sc, sw) = (noise_std(current), noise_std(&speed));
-    let (fc, fw) = (
-        FLOOR_FRACTION * peak(current),
-        FLOOR_FRACTION * peak(&speed),
-    );
+    let StartLevels {
+        current,
+        speed,
+        noise: (sc, sw),
+        floor: (fc, fw),
+        ..
+    } = levels;
+    let n = current.len();
     let (c0, w0) = (current[0], speed[0]);
-    let (w_start, sw_start) = match record.position {
-        Some(angle) => speed_at_start(angle, record.dt).unwrap_or((w0, sw)),
-        None => (w0, sw),
-    };
     let e0 = record.input.volts_at(0.0);
-    if c0.abs() <= REST_SIGMAS * sc + fc && w_start.abs() <= REST_SIGMAS * sw_start + fw {
-        return Ok(DetectedInitialState {
-            state: InitialState::Rest,
-            reason: format!(
-                "current {c0:.4e} A and speed {w0:.4e} rad/s at the first sample: at rest"
-            ),
-        });
-    }
     let first_change = match record.input {
         Input::Piecewise { times_s, .. } => times_s
             .iter()

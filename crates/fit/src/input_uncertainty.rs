@@ -130,14 +130,11 @@ pub fn estimate_level(samples: &[f64], scale: &VoltageScale) -> Option<LevelEsti
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
             (a.min(v), b.max(v))
         });
-    let codes: Vec<i64> = samples
-        .iter()
-        .map(|v| ((v - lo) / q).round() as i64)
-        .collect();
     let top = ((hi - lo) / q).round() as usize;
     let mut counts = vec![0.0; top + 1];
-    for &c in &codes {
-        if let Some(slot) = usize::try_from(c).ok().and_then(|c| counts.get_mut(c)) {
+    for v in samples {
+        let code = ((v - lo) / q).round() as i64;
+        if let Some(slot) = usize::try_from(code).ok().and_then(|c| counts.get_mut(c)) {
             *slot += 1.0;
         }
     }

@@ -78,7 +78,8 @@ pub use full_model::{
     FullFit, StepTest, PARAM_NAMES, PARAM_UNITS,
 };
 pub use initial_state::{
-    detect_initial_state, DetectedInitialState, FittedInitialState, InitialState,
+    detect_initial_state, detect_rest, DetectedInitialState, FittedInitialState, InitialState,
+    StartChannels,
 };
 pub use input_uncertainty::{
     estimate_level, quantisation_bias_variance, LevelEstimate, LevelPrior, StepInputs, VoltageScale,

@@ -760,7 +760,11 @@ pub fn run(a: &Settings) -> Result<()> {
         });
         crate::figures::fit_figures(dir, &records, f, a.quiet)?;
     }
-    converged(full)
+    let outcome = converged(full);
+    // The process ends with this command: the records' memory goes back to the system with
+    // it, not freed column by column first.
+    std::mem::forget((hv, lv));
+    outcome
 }
 
 /// Why a step pair cannot be fitted by the step methods, which start every step from rest:
