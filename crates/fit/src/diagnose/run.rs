@@ -749,8 +749,11 @@ fn candidate_start(
                 phase_rad: 0.3,
             })
         }
+        // A tenth of a sample period: small beside anything a record resolves, so that the
+        // screening's signature is the lag's at zero size (the simulator advances the filter
+        // exactly, so no time constant of it bounds the step).
         EffectKind::CurrentSensorLag => {
-            Effect::CurrentSensorLag(CurrentSensorLag { tau_f_s: 0.5 * dt })
+            Effect::CurrentSensorLag(CurrentSensorLag { tau_f_s: 0.1 * dt })
         }
         EffectKind::ThermalDrift => {
             // A rise of a few kelvin over the records' span at their mean copper loss.
