@@ -596,13 +596,7 @@ const FILTER_SERIES_TERMS: usize = 16;
 /// by the series `k! Σ_m (−z)^m/(m + k + 1)!` below `z = 1`, by the recurrence
 /// `z I_k = 1 − k I_{k−1}` (errors grow at most k/z a step) above.
 fn sensor_filter_step(y0: f64, tau: f64, h: f64, ends: [f64; 4]) -> f64 {
-    let [p0, d0, p1, d1] = ends;
-    let c = [
-        p0,
-        h * d0,
-        3.0 * (p1 - p0) - h * (2.0 * d0 + d1),
-        2.0 * (p0 - p1) + h * (d0 + d1),
-    ];
+    let c = hermite_in_step_fraction(h, ends);
     let z = h / tau;
     let mut integral = [0.0_f64; 4];
     if z < 1.0 {
@@ -630,6 +624,18 @@ fn sensor_filter_step(y0: f64, tau: f64, h: f64, ends: [f64; 4]) -> f64 {
     (-z).exp() * y0 + z * forced
 }
 
+/// Coefficients `c_k` of the cubic Hermite `p(s) = Σ c_k s^k`, `s = t/h`, through
+/// `ends = [p(0), p'(0), p(h), p'(h)]` over a step of `h` \[s\] (slopes per second).
+fn hermite_in_step_fraction(h: f64, ends: [f64; 4]) -> [f64; 4] {
+    let [p0, d0, p1, d1] = ends;
+    [
+        p0,
+        h * d0,
+        3.0 * (p1 - p0) - h * (2.0 * d0 + d1),
+        2.0 * (p0 - p1) + h * (d0 + d1),
+    ]
+}
+
 fn axpy<const N: usize>(x: &State<N>, a: f64, y: &State<N>) -> State<N> {
     let mut out = *x;
     for (o, yi) in out.iter_mut().zip(y) {
@@ -644,13 +650,7 @@ mod tests {
 
     /// The filter's output over one step by many small RK4 steps on the same cubic.
     fn by_small_steps(y0: f64, tau: f64, h: f64, ends: [f64; 4]) -> f64 {
-        let [p0, d0, p1, d1] = ends;
-        let c = [
-            p0,
-            h * d0,
-            3.0 * (p1 - p0) - h * (2.0 * d0 + d1),
-            2.0 * (p0 - p1) + h * (d0 + d1),
-        ];
+        let c = hermite_in_step_fraction(h, ends);
         let p = |t: f64| {
             let s = t / h;
             c[0] + s * (c[1] + s * (c[2] + s * c[3]))
