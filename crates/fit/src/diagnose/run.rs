@@ -278,7 +278,8 @@ pub struct Diagnosis {
     /// The nominal identification on the training data.
     pub nominal: FullFit,
     /// Why the nominal fit alone would not be a result, when the diagnosis went on anyway (a
-    /// channel explained worse than by its mean: what a large unmodelled effect does).
+    /// channel explained worse than by its mean, what a large unmodelled effect does; or a
+    /// motor parameter the records do not determine, which leaves the prediction as good).
     pub nominal_note: Option<String>,
     /// How the held-out data were made, in words.
     pub heldout: String,
@@ -763,8 +764,11 @@ fn candidate_start(
                 phase_rad: 0.3,
             })
         }
+        // A tenth of a sample period: small beside anything a record resolves, so that the
+        // screening's signature is the lag's at zero size (the simulator advances the filter
+        // exactly, so no time constant of it bounds the step).
         EffectKind::CurrentSensorLag => {
-            Effect::CurrentSensorLag(CurrentSensorLag { tau_f_s: 0.5 * dt })
+            Effect::CurrentSensorLag(CurrentSensorLag { tau_f_s: 0.1 * dt })
         }
         EffectKind::ThermalDrift => {
             // A rise of a few kelvin over the records' span at their mean copper loss.
@@ -796,21 +800,28 @@ fn candidate_start(
     }
 }
 
-/// Whether a refit of `kind` converged and is refused only because the records do not
-/// determine every parameter of the effect (no intervals, or an effect parameter's too wide):
-/// a thermal drift whose time constant is far longer than the records, say, whose heating rate
-/// they still show. Such a refit is judged like any other by its held-out improvement (the
-/// effect is there or not whatever its undetermined parameter); its report keeps the intervals
-/// it has, and its assessment says it is unresolved unless that improvement is significant.
-fn only_undetermined(fit: &FullFit, kind: EffectKind) -> bool {
-    fit.termination.converged()
-        && match &fit.refusal {
-            Some(crate::Refusal::NoIntervals) => true,
-            Some(crate::Refusal::Undetermined { parameter, .. }) => {
-                kind.params().iter().any(|p| p.symbol == *parameter)
-            }
-            _ => false,
+/// Whether a converged fit refused for `refusal` still gives a model the diagnosis can judge
+/// by its prediction (`kind`: the effect refitted; `None` for the nominal fit): refused only
+/// because the records do not determine every parameter (no intervals, or one too wide) — a
+/// motor parameter (an L whose time constant is far below the sample period, an f far below
+/// the electrical damping k²/R), or the effect's own (a thermal drift whose time constant is
+/// far longer than the records, whose heating rate they still show). The prediction is the
+/// same whatever the undetermined parameter's value within its interval, so the effect is
+/// there or not all the same; the report keeps the intervals there are, and a refit whose
+/// effect parameters are undetermined is named only when its held-out improvement is
+/// significant. A nominal model that explains a channel worse than its mean is what a large
+/// unmodelled effect does, and is diagnosed too. Any other refusal (parameters no motor could
+/// have) is not a model to build on.
+fn diagnosable(refusal: &crate::Refusal, kind: Option<EffectKind>) -> bool {
+    match refusal {
+        crate::Refusal::NoIntervals => true,
+        crate::Refusal::WorseThanConstant { .. } => kind.is_none(),
+        crate::Refusal::Undetermined { parameter, .. } => {
+            PARAM_NAMES.contains(parameter)
+                || kind.is_some_and(|k| k.params().iter().any(|p| p.symbol == *parameter))
         }
+        _ => false,
+    }
 }
 
 /// Whether a refit determines the effect's size: every fitted parameter has an interval no
@@ -909,12 +920,12 @@ pub fn diagnose(
     };
     let nominal = fit_nominal(&train, start)?;
     // A channel the nominal model explains worse than its mean is what an unmodelled effect
-    // can do: diagnosed, and said (`nominal_note`). Any other failure stops here.
+    // can do, and a motor parameter the records do not determine leaves the prediction the
+    // diagnosis works on as good as any value of it would: diagnosed, and said
+    // (`nominal_note`). Any other failure stops here.
     let nominal_note = match (&nominal.refusal, nominal.failure()) {
         (_, None) => None,
-        (Some(r @ crate::Refusal::WorseThanConstant { .. }), Some(_))
-            if nominal.termination.converged() =>
-        {
+        (Some(r), Some(_)) if nominal.termination.converged() && diagnosable(r, None) => {
             Some(r.to_string())
         }
         (_, Some(why)) => return Err(DiagnoseError::NominalFailed(why)),
@@ -1195,10 +1206,12 @@ fn run_stage(
             settings.step_factor,
         )
         .map_err(|e| e.to_string())
-        .and_then(|fit| match fit.failure() {
-            Some(_) if only_undetermined(&fit, kind) => Ok(fit),
-            Some(why) => Err(why),
-            None => Ok(fit),
+        .and_then(|fit| match (&fit.refusal, fit.failure()) {
+            (_, None) => Ok(fit),
+            (Some(r), Some(_)) if fit.termination.converged() && diagnosable(r, Some(kind)) => {
+                Ok(fit)
+            }
+            (_, Some(why)) => Err(why),
         })
         .and_then(|fit| {
             predict_with_step_factor(base.all, &fit.params, &fit.effects, settings.step_factor)

@@ -63,6 +63,13 @@ pub(crate) trait Dynamics {
     fn sensor_state(&self) -> Option<usize> {
         None
     }
+    /// Time constant \[s\] of the first-order filter `τ dI_f/dt = I − I_f` that the sensor
+    /// state is, if it is one: the simulator then advances it exactly over each step (on the
+    /// cubic through the current's values and slopes at the step's ends) instead of by RK4,
+    /// so that a filter far faster than the plant does not bound the step.
+    fn sensor_time_constant(&self) -> Option<f64> {
+        None
+    }
     /// The fastest rate \[1/s\] of its own dynamics on motor `p` (beyond R and L).
     fn own_rate(&self, _p: &MotorParams) -> f64 {
         0.0
@@ -129,6 +136,9 @@ impl Dynamics for Effect {
     fn sensor_state(&self) -> Option<usize> {
         on_effect!(self, e => e.sensor_state())
     }
+    fn sensor_time_constant(&self) -> Option<f64> {
+        on_effect!(self, e => e.sensor_time_constant())
+    }
     fn own_rate(&self, p: &MotorParams) -> f64 {
         on_effect!(self, e => e.own_rate(p))
     }
@@ -180,8 +190,9 @@ impl Dynamics for CurrentSensorLag {
     fn sensor_state(&self) -> Option<usize> {
         Some(0)
     }
-    fn own_rate(&self, _p: &MotorParams) -> f64 {
-        1.0 / self.tau_f_s
+    /// τf: the filter is advanced exactly, and its rate does not bound the step.
+    fn sensor_time_constant(&self) -> Option<f64> {
+        Some(self.tau_f_s)
     }
 }
 
