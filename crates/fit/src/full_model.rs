@@ -362,22 +362,8 @@ impl FullProblem {
     /// of each test, `Σᵢ gᵢgᵢᵀ + Σₗ wₗ (gᵢgᵢ₋ₗᵀ + gᵢ₋ₗgᵢᵀ)` with `gᵢ = rᵢ ∂rᵢ/∂θ` and Bartlett
     /// weights `wₗ = 1 − l/(L+1)`; channels are taken as independent of each other.
     fn score_covariance(&self, theta: &[f64]) -> Option<DMatrix<f64>> {
-        let params = params_of::<Dual<6>>(theta, Dual::variable)?;
-        // One accumulator per (test, channel): residuals stream interleaved across channels.
-        let mut series: Vec<Vec<NeweyWest>> = self
-            .tests
-            .iter()
-            .map(|w| w.channels.iter().map(|_| NeweyWest::new(6, w.n)).collect())
-            .collect();
-        self.for_each(params, |k, c, _, m, y, sigma| {
-            let r = (m.v - y) / sigma;
-            series[k][c].push(&m.d.map(|d| d / sigma * r));
-        });
-        let mut total = DMatrix::zeros(6, 6);
-        for nw in series.iter().flatten() {
-            total += nw.finish()?;
-        }
-        Some(total)
+        let (r, jac) = self.linear_parts(theta)?;
+        self.score_covariance_of(&r, &jac)
     }
 }
 
@@ -515,6 +501,39 @@ impl NuisanceProblem for FullProblem {
         let mut r = Vec::with_capacity(self.n_residuals);
         self.for_each(params, |_, _, _, m, y, sigma| r.push((m - y) / sigma));
         r.iter().all(|v| v.is_finite()).then_some(r)
+    }
+
+    fn score_covariance_of(&self, r: &[f64], jac: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+        let p = jac.ncols();
+        if r.len() != jac.nrows() {
+            return None;
+        }
+        // One accumulator per (test, channel): the residuals stream interleaved across
+        // channels, in the order of `for_each` (any parameters give the same order).
+        let mut series: Vec<Vec<NeweyWest>> = self
+            .tests
+            .iter()
+            .map(|w| w.channels.iter().map(|_| NeweyWest::new(p, w.n)).collect())
+            .collect();
+        let mut row = 0;
+        let mut score = vec![0.0; p];
+        self.for_each([1.0; 6], |k, c, _, _: f64, _, _| {
+            if let (Some(&ri), Some(nw)) = (r.get(row), series[k].get_mut(c)) {
+                for (j, g) in score.iter_mut().enumerate() {
+                    *g = ri * jac[(row, j)];
+                }
+                nw.push(&score);
+            }
+            row += 1;
+        });
+        if row != r.len() {
+            return None;
+        }
+        let mut total = DMatrix::zeros(p, p);
+        for nw in series.iter().flatten() {
+            total += nw.finish()?;
+        }
+        Some(total)
     }
 }
 

@@ -9,11 +9,15 @@
 //! After the fit of `θ = ln p` at `u = ū`, the inputs are treated as parameters with a Gaussian
 //! prior: one joint Gauss–Newton step on `(θ, u)` with the prior rows `(u − ū)/√V` moves `u`
 //! where the records say it is (a sub-sample step instant is seen in the current's rise), `θ` is
-//! refitted there, and the covariance is the `θ` block of the joint problem,
-//! `Cov θ = Cov(θ | u) + G S Gᵀ` with `G = −(J_θᵀJ_θ)⁻¹ J_θᵀ J_u` (the implicit-function
-//! sensitivity of `θ̂` to `u`) and `S = (J_uᵀJ_u + V⁻¹ − J_uᵀJ_θ (J_θᵀJ_θ)⁻¹ J_θᵀJ_u)⁻¹` the
-//! posterior covariance of `u` (matrix inversion lemma on the joint normal matrix). `Cov(θ | u)`
-//! stays the Newey–West sandwich; `J_u` is by central differences of the weighted residuals.
+//! refitted there, and the covariance is the `θ` block of the joint sandwich
+//! `H⁻¹ (S + diag(0, V⁻¹)) H⁻¹ · n/(n − p)`, where `H = [[J_θᵀJ_θ, J_θᵀJ_u], [J_uᵀJ_θ,
+//! J_uᵀJ_u + V⁻¹]]` is the joint normal matrix, `S` the Newey–West covariance of the joint score
+//! `[J_θ J_u]ᵀ r` (the problem's own series and runs of equal readings) and `V⁻¹` that of the
+//! prior's score (`ū − u` has covariance `V`). With white residuals `S = [J_θ J_u]ᵀ[J_θ J_u]`
+//! and this is `H⁻¹`, the `Cov(θ | u) + G S_u Gᵀ` of the matrix inversion lemma; with
+//! correlated ones (quantisation without noise holds one error for seconds) the residuals
+//! inform `u` far less than `J_uᵀJ_u` says, and only the sandwich counts that. `J_u` is by
+//! central differences of the weighted residuals.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -362,18 +366,40 @@ pub(crate) trait NuisanceProblem: WeightedProblem {
     /// The weighted residuals at `theta`, on the discretisation of the last
     /// [`Self::linear_parts`].
     fn residual_vector(&self, theta: &[f64]) -> Option<Vec<f64>>;
+    /// Newey–West covariance of the score `Jᵀr` of the weighted residuals `r` (in the order of
+    /// [`Self::residual_vector`]) for any Jacobian columns `jac` (θ and inputs alike), with the
+    /// problem's own independent series and runs of errors that move together.
+    fn score_covariance_of(&self, r: &[f64], jac: &DMatrix<f64>) -> Option<DMatrix<f64>>;
 }
 
 /// The joint linearisation at one point.
 struct Joint {
-    /// Number of residuals.
-    n: usize,
-    /// `G = −(J_θᵀJ_θ)⁻¹ J_θᵀJ_u`.
-    g: DMatrix<f64>,
-    /// Posterior covariance of `u`.
-    s: DMatrix<f64>,
+    /// Weighted residuals.
+    r: Vec<f64>,
+    /// Their Jacobian in `(θ, u)`, `[J_θ J_u]` (n × (p + m)).
+    jac: DMatrix<f64>,
+    /// Inverse of the joint normal matrix `H` (prior included).
+    h_inv: DMatrix<f64>,
+    /// Prior information `V⁻¹` of each input.
+    prior_info: Vec<f64>,
     /// Joint Gauss–Newton step on `(θ, u)`.
     step: DVector<f64>,
+}
+
+impl Joint {
+    /// The `θ` block (`p` parameters) of the joint sandwich covariance (module documentation),
+    /// with the residuals' score covariance `score_cov` of `[J_θ J_u]`.
+    fn theta_covariance(&self, score_cov: &DMatrix<f64>, p: usize) -> Option<DMatrix<f64>> {
+        let n = self.r.len();
+        let dof = n.checked_sub(p).filter(|&d| d > 0)?;
+        let mut meat = score_cov.clone();
+        for (j, info) in self.prior_info.iter().enumerate() {
+            meat[(p + j, p + j)] += info;
+        }
+        let cov = &self.h_inv * meat * &self.h_inv * (n as f64 / dof as f64);
+        let theta = cov.view((0, 0), (p, p)).into_owned();
+        theta.iter().all(|v| v.is_finite()).then_some(theta)
+    }
 }
 
 fn linearise<P: NuisanceProblem>(problem: &mut P, theta: &[f64]) -> Option<Joint> {
@@ -408,10 +434,6 @@ fn linearise<P: NuisanceProblem>(problem: &mut P, theta: &[f64]) -> Option<Joint
         }
     });
     let d = ju.tr_mul(&ju) + &prior_info;
-    let a_inv = scaled_inverse(&a)?;
-    let g = -(&a_inv * &b);
-    let schur = &d + b.transpose() * &g;
-    let s = scaled_inverse(&schur)?;
     // The joint normal equations [[A, B], [Bᵀ, D]] (δθ, δu) = −(J_θᵀr, J_uᵀr + V⁻¹(u − ū)).
     let mut h = DMatrix::zeros(p + m, p + m);
     h.view_mut((0, 0), (p, p)).copy_from(&a);
@@ -424,10 +446,18 @@ fn linearise<P: NuisanceProblem>(problem: &mut P, theta: &[f64]) -> Option<Joint
         (nuisances[j].value - nuisances[j].prior_mean) / nuisances[j].prior_variance
     });
     grad.rows_mut(p, m).copy_from(&(ju.tr_mul(&r) + offset));
-    let step = -(scaled_inverse(&h)? * grad);
-    step.iter()
-        .all(|v| v.is_finite())
-        .then_some(Joint { n, g, s, step })
+    let h_inv = scaled_inverse(&h)?;
+    let step = -(&h_inv * grad);
+    let mut jac = DMatrix::zeros(n, p + m);
+    jac.view_mut((0, 0), (n, p)).copy_from(&jt);
+    jac.view_mut((0, p), (n, m)).copy_from(&ju);
+    step.iter().all(|v| v.is_finite()).then_some(Joint {
+        r: r.iter().copied().collect(),
+        jac,
+        h_inv,
+        prior_info: nuisances.iter().map(|u| 1.0 / u.prior_variance).collect(),
+        step,
+    })
 }
 
 /// Fits `problem` from `theta0` as [`fit_weighted`] does, then moves its uncertain inputs
@@ -481,12 +511,12 @@ pub(crate) fn fit_with_inputs<P: NuisanceProblem>(
     }
     fit.iterations = iterations;
     let theta = fit.theta.clone();
-    if let (Some(joint), Some(conditional)) =
-        (linearise(problem, &theta), fit.theta_covariance.clone())
-    {
-        let cov = conditional + &joint.g * &joint.s * joint.g.transpose();
-        let dof = joint.n.saturating_sub(p);
-        set_intervals(&mut fit, problem.parameters(), Some(cov), dof);
+    if let Some(joint) = linearise(problem, &theta) {
+        let cov = problem
+            .score_covariance_of(&joint.r, &joint.jac)
+            .and_then(|score| joint.theta_covariance(&score, p));
+        let dof = joint.r.len().saturating_sub(p);
+        set_intervals(&mut fit, problem.parameters(), cov, dof);
     }
     // The widened intervals are the ones reported: judge the result on them.
     fit.refusal = crate::plausibility::assess(&fit, &problem.facts());
@@ -499,6 +529,65 @@ mod tests {
 
     fn quantise(x: f64, q: f64, lo: f64) -> f64 {
         lo + ((x - lo) / q).round().max(0.0) * q
+    }
+
+    /// A joint problem `n × (p + m)` with a fixed pseudo-random Jacobian and residuals.
+    fn joint(n: usize, p: usize, prior_variance: &[f64]) -> Joint {
+        let m = prior_variance.len();
+        let mut rng = motor_model::NoiseRng::new(3);
+        let jac = DMatrix::from_fn(n, p + m, |_, _| rng.normal());
+        let r: Vec<f64> = (0..n).map(|_| rng.normal()).collect();
+        let mut h = jac.tr_mul(&jac);
+        for (j, v) in prior_variance.iter().enumerate() {
+            h[(p + j, p + j)] += 1.0 / v;
+        }
+        Joint {
+            r,
+            jac,
+            h_inv: scaled_inverse(&h).unwrap(),
+            prior_info: prior_variance.iter().map(|v| 1.0 / v).collect(),
+            step: DVector::zeros(p + m),
+        }
+    }
+
+    #[test]
+    fn joint_sandwich_with_white_scores_is_the_conditional_covariance_plus_the_inputs_share() {
+        // With the score covariance JᵀJ (white residuals of unit variance) the θ block of the
+        // sandwich is (J_θᵀJ_θ)⁻¹ + G S Gᵀ: the matrix inversion lemma.
+        let (n, p, v) = (40, 3, [0.5, 2.0]);
+        let j = joint(n, p, &v);
+        let score = j.jac.tr_mul(&j.jac);
+        let got = j.theta_covariance(&score, p).unwrap() * ((n - p) as f64 / n as f64);
+        let jt = j.jac.columns(0, p).into_owned();
+        let ju = j.jac.columns(p, v.len()).into_owned();
+        let a_inv = scaled_inverse(&jt.tr_mul(&jt)).unwrap();
+        let g = -(&a_inv * jt.tr_mul(&ju));
+        let mut d = ju.tr_mul(&ju);
+        for (k, var) in v.iter().enumerate() {
+            d[(k, k)] += 1.0 / var;
+        }
+        let s_u = scaled_inverse(&(d + ju.tr_mul(&jt) * &g)).unwrap();
+        let want = a_inv + &g * s_u * g.transpose();
+        assert!(
+            (&got - &want).norm() < 1e-10 * want.norm(),
+            "{got} vs {want}"
+        );
+    }
+
+    #[test]
+    fn joint_sandwich_widens_with_the_score_covariance() {
+        // Residuals that move together (a score covariance four times JᵀJ) inform θ and the
+        // inputs less: the θ variances grow, though by less than four times (the prior's share
+        // does not grow).
+        let (p, v) = (3, [0.05, 0.2]);
+        let j = joint(40, p, &v);
+        let white = j.jac.tr_mul(&j.jac);
+        let narrow = j.theta_covariance(&white, p).unwrap();
+        let wide = j.theta_covariance(&(white * 4.0), p).unwrap();
+        for k in 0..p {
+            let ratio = wide[(k, k)] / narrow[(k, k)];
+            assert!(ratio > 1.0 && ratio < 4.0, "parameter {k}: ratio {ratio}");
+        }
     }
 
     #[test]

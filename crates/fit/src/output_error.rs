@@ -566,19 +566,7 @@ impl WeightedProblem for OeProblem {
 
     fn score_covariance(&self, theta: &[f64]) -> Option<DMatrix<f64>> {
         let (r, jac) = self.jacobian(theta)?;
-        let series: Vec<usize> = self
-            .records
-            .iter()
-            .flat_map(|rec| rec.channels.iter().map(|ch| ch.data.len()))
-            .collect();
-        // Readings that repeat exactly share one quantisation error: see
-        // [`newey_west_run_covariance`].
-        let runs: Vec<usize> = self
-            .records
-            .iter()
-            .flat_map(|rec| rec.channels.iter().flat_map(|ch| equal_runs(&ch.data)))
-            .collect();
-        newey_west_run_covariance(&r, &jac, &series, &runs)
+        self.score_covariance_of(&r, &jac)
     }
 
     fn fitted_channels(&self, theta: &[f64]) -> Vec<FittedChannel> {
@@ -1029,6 +1017,15 @@ impl NuisanceProblem for OeProblem {
 
     fn residual_vector(&self, theta: &[f64]) -> Option<Vec<f64>> {
         self.residuals(theta)
+    }
+
+    fn score_covariance_of(&self, r: &[f64], jac: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+        let channels = || self.records.iter().flat_map(|rec| &rec.channels);
+        let series: Vec<usize> = channels().map(|ch| ch.data.len()).collect();
+        // Readings that repeat exactly share one quantisation error: see
+        // [`newey_west_run_covariance`].
+        let runs: Vec<usize> = channels().flat_map(|ch| equal_runs(&ch.data)).collect();
+        newey_west_run_covariance(r, jac, &series, &runs)
     }
 }
 

@@ -210,7 +210,13 @@ pub struct Logged {
 
 /// Logs `truth` with a 10-bit ADC: the voltage over `[v_lo, v_hi]` with `voltage_noise_lsb`,
 /// the current over `[0, 1.2 max I]·stretch` (or symmetric when it reverses) with `noise_lsb`,
-/// and a 2000-count encoder.
+/// and a 2000-count encoder. A range that straddles zero is moved by a random fraction of a
+/// step (uniform over ±½ LSB, readings at the moved codes: no bias), so that over the runs
+/// zero and the values a few steps from it sit anywhere between two codes — as the fits'
+/// intervals take them to. Without it 0 V and 0 A sit exactly halfway between two codes in
+/// every run and a settled current a few codes from zero (the 2.5 V level's, about 11) at
+/// nearly the same place, the 5 % stretch of the range moving it by half a code: noise-free
+/// quantisation errors then had the same sign in most runs.
 pub fn log(
     truth: &Truth,
     (v_lo, v_hi): (f64, f64),
@@ -225,15 +231,18 @@ pub fn log(
     } else {
         0.0
     };
+    let mut offset = |lo: f64, hi: f64| {
+        if lo < 0.0 {
+            let shift = (rng.uniform() - 0.5) * (hi - lo) / 1023.0;
+            (lo + shift, hi + shift)
+        } else {
+            (lo, hi)
+        }
+    };
+    let (v_lo, v_hi) = offset(v_lo, v_hi);
+    let (i_lo, i_hi) = offset(i_lo, 1.2 * i_max * stretch);
     let (voltage, voltage_lsb) = adc(&truth.voltage, v_lo, v_hi, 10, voltage_noise_lsb, rng);
-    let (current, current_lsb) = adc(
-        &truth.current,
-        i_lo,
-        1.2 * i_max * stretch,
-        10,
-        noise_lsb,
-        rng,
-    );
+    let (current, current_lsb) = adc(&truth.current, i_lo, i_hi, 10, noise_lsb, rng);
     Logged {
         voltage,
         current,
