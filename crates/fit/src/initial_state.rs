@@ -79,21 +79,35 @@ const START_ANGLES: usize = 6;
 
 /// The speed \[rad/s\] at the first sample of an encoder angle sampled every `dt` \[s\], and
 /// its standard error: the slope at t = 0 of `θ0 + Ω0 t + a t²/2` fitted by least squares to
-/// the first [`START_ANGLES`] angles, their noise the angle's own ([`noise_std`]: about a
-/// third of a count for a quantised one).
+/// the first [`START_ANGLES`] angles, their scatter the larger of the angle's own noise
+/// ([`noise_std`]: about a third of a count for a quantised one) and the parabola's residual
+/// scatter. A motor started from rest at its step within a few samples of its time constants
+/// turns as `θ ∝ t³` at first and then bends: no parabola follows it, and its slope at 0 is not
+/// the speed (a fast motor stepped at the first sample read as moving at 59 rad/s, with a
+/// standard error of 0.4 rad/s from the count alone, and its fit from a free initial state was
+/// biased by a half-width in L and J).
 fn speed_at_start(angle: &[f64], dt: f64) -> Option<(f64, f64)> {
     let first = angle.get(..START_ANGLES)?;
     let mut xtx = nalgebra::Matrix3::<f64>::zeros();
     let mut xty = nalgebra::Vector3::<f64>::zeros();
-    for (k, th) in first.iter().enumerate() {
+    let row = |k: usize| {
         let t = k as f64 * dt;
-        let x = nalgebra::Vector3::new(1.0, t, 0.5 * t * t);
+        nalgebra::Vector3::new(1.0, t, 0.5 * t * t)
+    };
+    for (k, th) in first.iter().enumerate() {
+        let x = row(k);
         xtx += x * x.transpose();
         xty += x * (th - first[0]);
     }
     let inv = xtx.try_inverse()?;
     let beta = inv * xty;
-    let sigma = noise_std(angle);
+    let rss: f64 = first
+        .iter()
+        .enumerate()
+        .map(|(k, th)| (th - first[0] - row(k).dot(&beta)).powi(2))
+        .sum();
+    let misfit = (rss / (START_ANGLES - 3) as f64).sqrt();
+    let sigma = noise_std(angle).max(misfit);
     Some((beta[1], sigma * inv[(1, 1)].sqrt())).filter(|(w, s)| w.is_finite() && s.is_finite())
 }
 

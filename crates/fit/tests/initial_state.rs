@@ -236,3 +236,35 @@ fn a_steady_start_fitted_from_rest_is_not_a_result() {
         fit.params
     );
 }
+
+/// A fast motor stepped at the first sample, its time constants a few samples long (τe = 3.2
+/// and τm = 6.7 sample periods at 430 Hz, the motor of the heavy property run's case 136),
+/// recorded by a 12-bit logger with a 500-count encoder: it starts at rest, and is seen so on
+/// seeds 1, 2, 3. Its angle turns as t³ and then bends within the first six samples, so the
+/// parabola through them has a slope of tens of rad/s at t = 0; read as the speed, that made
+/// the record a slice of a longer run, fitted from a free initial state with L and J biased by
+/// about one half-width of their intervals on every seed.
+#[test]
+fn a_fast_motor_stepped_at_the_first_sample_starts_at_rest() {
+    let motor = MotorParams::new(1.847, 0.013_72, 0.015_51, 1.494e-5, 2.341e-7, 5.19e-4).unwrap();
+    let rate_hz = 430.0;
+    for seed in SEEDS {
+        let trace = Simulator::new(motor, Effects::none(), Input::step(17.5, 0.0).unwrap())
+            .unwrap()
+            .run(1.0, rate_hz)
+            .unwrap();
+        let ranges = [&trace.voltage, &trace.current, &trace.speed]
+            .map(|s| motor_model::Range::covering(s));
+        let rec = MeasurementModel::logger(12, ranges, 1.0, 500, seed)
+            .apply(&trace)
+            .unwrap();
+        let (input, _) = voltage_levels(&rec.t, &rec.voltage, None).unwrap();
+        let detected = detect_initial_state(&excited(&rec, &input)).unwrap();
+        assert_eq!(
+            detected.state,
+            InitialState::Rest,
+            "seed {seed}: {}",
+            detected.reason
+        );
+    }
+}
