@@ -1011,7 +1011,8 @@ pub fn identify_feedforward(
     theta0.extend(std::iter::repeat_n(0.0, nuisances));
     let mut iterations = 0;
     let reduced = fit_stages(&mut problem, &theta0, settings.lm, &mut iterations)?;
-    let mut result = (reduced.clone(), TauE::Neglected);
+    // The kept fit, what it says of τe, and its uncertainty where already computed.
+    let mut result = (reduced.clone(), TauE::Neglected, None);
     // The reduced fit is only a start for the model with τe: one that stalled (the reduced
     // model disagreeing with a record whose τe is not small) starts it as well.
     let usable = reduced.termination.converged() || reduced.termination == Termination::Stalled;
@@ -1085,10 +1086,12 @@ pub fn identify_feedforward(
             for (r, s) in problem.records.iter_mut().zip(&weights) {
                 r.sigma = *s;
             }
-            let ci = intervals(&problem, &fit);
+            let unc = fit_uncertainty(&problem, &fit);
+            let ci = unc.as_ref().map(|u| intervals_of(&problem, &fit, u));
             // Without k, kA can trade against τe and the viscous share of kV (no interval, or
             // kA's reaching 0): then the two coefficients the records fix are fitted instead.
             let undetermined = ci.as_ref().is_none_or(|(_, c)| c[2][0] <= 0.0);
+            let unc = unc.filter(|_| !undetermined);
             kept = if settings.torque_constant.is_none() && undetermined {
                 traded(&mut problem, &fit, ks0, settings.lm, &mut iterations)?
             } else {
@@ -1104,7 +1107,7 @@ pub fn identify_feedforward(
                     } else {
                         TauE::NotResolved { upper_s: ci[1] }
                     };
-                    (fit, t)
+                    (fit, t, unc)
                 })
             };
         }
@@ -1116,20 +1119,24 @@ pub fn identify_feedforward(
                     r.sigma = *s;
                 }
                 result.1 = TauE::Unfitted;
+                result.2 = None;
             }
         }
     }
-    let (report, tau_e) = result;
+    let (report, tau_e, unc) = result;
     let model = problem
         .params_of(&report.params)
         .ok_or_else(|| FitError::Solver("parameters left the representable range".into()))?;
-    let ci95 = intervals(&problem, &report).map(|(_, ci)| {
-        let ka = match tau_e {
-            TauE::Traded { lead_ci95, .. } => [0.0, lead_ci95[1]],
-            _ => ci[2],
-        };
-        [ci[0], ci[1], ka]
-    });
+    let ci95 = unc
+        .or_else(|| fit_uncertainty(&problem, &report))
+        .map(|u| intervals_of(&problem, &report, &u))
+        .map(|(_, ci)| {
+            let ka = match tau_e {
+                TauE::Traded { lead_ci95, .. } => [0.0, lead_ci95[1]],
+                _ => ci[2],
+            };
+            [ci[0], ci[1], ka]
+        });
     let initial_speed_rad_s = problem
         .records
         .iter()
@@ -1201,9 +1208,13 @@ fn fit_stages(
 }
 
 /// Standard errors and 95 % intervals of the model's parameters (kS, kV, kA, and τe when
-/// fitted; SI units) at `report`, from the Newey–West sandwich record by record.
-fn intervals(problem: &FfProblem, report: &LmReport) -> Option<(Vec<f64>, Vec<[f64; 2]>)> {
-    let unc = fit_uncertainty(problem, report)?;
+/// fitted; SI units) at `report`, from its uncertainty `unc` ([`fit_uncertainty`]: the
+/// Newey–West sandwich record by record), computed once per kept fit.
+fn intervals_of(
+    problem: &FfProblem,
+    report: &LmReport,
+    unc: &Uncertainty,
+) -> (Vec<f64>, Vec<[f64; 2]>) {
     let m = problem.n_model();
     let values: Vec<f64> = report.params[..m].iter().map(|t| t.exp()).collect();
     let std: Vec<f64> = (0..m).map(|i| values[i] * unc.std_error[i]).collect();
@@ -1213,7 +1224,7 @@ fn intervals(problem: &FfProblem, report: &LmReport) -> Option<(Vec<f64>, Vec<[f
             [values[i] - half, values[i] + half]
         })
         .collect();
-    Some((std, ci))
+    (std, ci)
 }
 
 /// The sandwich uncertainty of every fitted parameter (in the fit's own coordinates: the
@@ -1250,7 +1261,7 @@ fn traded(
     ks0: f64,
     lm: LmSettings,
     iterations: &mut u64,
-) -> Result<Option<(LmReport, TauE)>, FitError> {
+) -> Result<Option<(LmReport, TauE, Option<Uncertainty>)>, FitError> {
     let Some(p) = problem.params_of(&fit.params) else {
         return Ok(None);
     };
@@ -1279,15 +1290,18 @@ fn traded(
             let h_lead = lead * unc.ci95_half_width[2];
             let h_product =
                 product * ratio * (c[(2, 2)] + 2.0 * c[(2, 3)] + c[(3, 3)]).max(0.0).sqrt();
-            (h_lead < lead && h_product < product).then_some(TauE::Traded {
-                lead_v_s2_per_rad: lead,
-                lead_ci95: [lead - h_lead, lead + h_lead],
-                product_v_s3_per_rad: product,
-                product_ci95: [product - h_product, product + h_product],
-            })
+            (h_lead < lead && h_product < product).then_some((
+                TauE::Traded {
+                    lead_v_s2_per_rad: lead,
+                    lead_ci95: [lead - h_lead, lead + h_lead],
+                    product_v_s3_per_rad: product,
+                    product_ci95: [product - h_product, product + h_product],
+                },
+                unc,
+            ))
         });
     match traded {
-        Some(t) => Ok(Some((refit, t))),
+        Some((t, unc)) => Ok(Some((refit, t, Some(unc)))),
         None => {
             problem.share_at_zero = false;
             Ok(None)

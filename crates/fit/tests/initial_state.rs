@@ -253,8 +253,8 @@ fn a_fast_motor_stepped_at_the_first_sample_starts_at_rest() {
             .unwrap()
             .run(1.0, rate_hz)
             .unwrap();
-        let ranges = [&trace.voltage, &trace.current, &trace.speed]
-            .map(|s| motor_model::Range::covering(s));
+        let ranges =
+            [&trace.voltage, &trace.current, &trace.speed].map(|s| motor_model::Range::covering(s));
         let rec = MeasurementModel::logger(12, ranges, 1.0, 500, seed)
             .apply(&trace)
             .unwrap();
