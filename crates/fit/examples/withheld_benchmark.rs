@@ -25,6 +25,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seed: u64 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(1);
     let n: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(160);
     let mut settings = DiagnoseSettings::default();
+    if let Some(n) = std::env::var("WITHHELD_ITERS").ok().and_then(|s| s.parse().ok()) {
+        // Iterations of every fit at most (the default bounds the time of a case).
+        settings.lm.max_iters = n;
+        settings.lm.max_evaluations = 5 * n;
+    }
     if std::env::var_os("WITHHELD_REFIT_ALL").is_some() {
         // Every candidate refitted, whatever its screening score.
         settings.refits = settings.candidates.len();
@@ -115,6 +120,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 }
                 println!("  level {:.2e}", stage.verdict.level);
             }
+        }
+        return Ok(());
+    }
+    if std::env::var_os("WITHHELD_LIST").is_some() {
+        // The cases' truths and forms only, without diagnosing them.
+        for i in 0..n {
+            let case = benchmark_case(seed, i, n)?;
+            let forms: Vec<String> = case.effects.iter().map(|e| e.effect.form_label()).collect();
+            println!(
+                "{i:>4}  {:<45} {:?} visibility {:.1}",
+                case.truth().join("+"),
+                forms,
+                case.visibility
+            );
         }
         return Ok(());
     }

@@ -749,6 +749,52 @@ fn shapes_searched(
     }
 }
 
+/// Stribeck speeds the screening starts from, as fractions of the slowest record's peak speed
+/// (the fit moves Ωs; the screening keeps the start whose signature explains most of the
+/// residual, so that a refit does not start a decade away from a dip near Ω = 0).
+const STRIBECK_START_FRACTIONS: [f64; 3] = [0.03, 0.1, 0.3];
+
+/// The starts of `kind` on `motor` the screening chooses among: [`candidate_start`], and for a
+/// Stribeck friction also Stribeck speeds at [`STRIBECK_START_FRACTIONS`] of the slowest
+/// record's peak speed.
+fn candidate_starts(
+    kind: EffectKind,
+    motor: &MotorParams,
+    records: &[ExcitedRecord<'_>],
+    localisation: &Localisation,
+) -> Vec<Effect> {
+    let first = candidate_start(kind, motor, records, localisation);
+    let mut starts = vec![first];
+    if let Effect::StribeckFriction(s) = first {
+        let w_slowest = records
+            .iter()
+            .filter_map(peak_speed)
+            .fold(f64::INFINITY, f64::min);
+        if w_slowest.is_finite() && w_slowest > 0.0 {
+            starts.extend(STRIBECK_START_FRACTIONS.iter().map(|&x| {
+                Effect::StribeckFriction(StribeckFriction {
+                    stribeck_speed_rad_s: x * w_slowest,
+                    ..s
+                })
+            }));
+        }
+    }
+    starts
+}
+
+/// A record's peak |Ω| \[rad/s\] (from its speed, else its angle's differences).
+fn peak_speed(r: &ExcitedRecord<'_>) -> Option<f64> {
+    r.speed
+        .map(|s| s.iter().fold(0.0_f64, |m, v| m.max(v.abs())))
+        .or_else(|| {
+            r.position.map(|p| {
+                p.windows(2)
+                    .map(|w| ((w[1] - w[0]) / r.dt).abs())
+                    .fold(0.0_f64, f64::max)
+            })
+        })
+}
+
 /// A small starting size of `kind` on `motor`, its shape from the records.
 fn candidate_start(
     kind: EffectKind,
@@ -759,18 +805,7 @@ fn candidate_start(
     let peak = |f: &dyn Fn(&ExcitedRecord<'_>) -> Option<f64>| {
         records.iter().filter_map(f).fold(0.0_f64, f64::max)
     };
-    let w_max = peak(&|r| {
-        r.speed
-            .map(|s| s.iter().fold(0.0_f64, |m, v| m.max(v.abs())))
-            .or_else(|| {
-                r.position.map(|p| {
-                    p.windows(2)
-                        .map(|w| ((w[1] - w[0]) / r.dt).abs())
-                        .fold(0.0_f64, f64::max)
-                })
-            })
-    })
-    .max(1e-3);
+    let w_max = peak(&peak_speed).max(1e-3);
     let i_max = peak(&|r| Some(r.current.iter().fold(0.0_f64, |m, v| m.max(v.abs())))).max(1e-6);
     let dt = records.iter().map(|r| r.dt).fold(f64::INFINITY, f64::min);
     let span = peak(&|r| Some(r.current.len() as f64 * r.dt));
@@ -1110,15 +1145,17 @@ fn localise_all(
 type Refit = (CandidateReport, Vec<f64>, Option<f64>);
 
 /// The screening of `kinds` on top of `base` (see [`crate::diagnose::screen`]), in their
-/// order: `None` for a candidate whose signature could not be simulated, and for every one
-/// when the base model cannot be linearised (those are refitted unscreened).
+/// order, each with the start its refit begins from (of [`candidate_starts`], the testable one
+/// of largest statistic): `None` for a candidate whose signature could not be simulated, and
+/// for every one when the base model cannot be linearised (those are refitted unscreened, from
+/// [`candidate_start`]).
 fn screen_stage(
     kinds: &[EffectKind],
     base: &Base<'_>,
     sigmas: &[(usize, Channel, f64)],
     localisation: &Localisation,
     settings: &DiagnoseSettings,
-) -> Vec<Option<Screening>> {
+) -> Vec<(Option<Screening>, Effect)> {
     let factor = settings.step_factor;
     let projection =
         output_error_sensitivity(base.train, &base.motor, &base.effects, sigmas, None, factor)
@@ -1129,23 +1166,53 @@ fn screen_stage(
                 BaseProjection::new(&lin.residuals, &jacobian, &lin.series)
             });
     let Some(projection) = projection else {
-        return vec![None; kinds.len()];
+        return kinds
+            .iter()
+            .map(|&kind| {
+                (
+                    None,
+                    candidate_start(kind, &base.motor, base.train, localisation),
+                )
+            })
+            .collect();
     };
     kinds
         .iter()
         .map(|&kind| {
-            let effect = candidate_start(kind, &base.motor, base.train, localisation);
-            let effects = base.effects.with(effect);
-            output_error_sensitivity(
-                base.train,
-                &base.motor,
-                &effects,
-                sigmas,
-                Some(kind),
-                factor,
-            )
-            .ok()
-            .map(|sig| projection.score(&sig.jacobian))
+            let starts = candidate_starts(kind, &base.motor, base.train, localisation);
+            let scored: Vec<(Option<Screening>, Effect)> = starts
+                .iter()
+                .map(|&effect| {
+                    let effects = base.effects.with(effect);
+                    let score = output_error_sensitivity(
+                        base.train,
+                        &base.motor,
+                        &effects,
+                        sigmas,
+                        Some(kind),
+                        factor,
+                    )
+                    .ok()
+                    .map(|sig| projection.score(&sig.jacobian));
+                    (score, effect)
+                })
+                .collect();
+            // The first start unless another is testable with a larger statistic.
+            let rank = |x: &Option<Screening>| {
+                x.filter(|s| s.testable)
+                    .map_or(f64::NEG_INFINITY, |s| s.statistic)
+            };
+            scored
+                .iter()
+                .copied()
+                .reduce(|best, next| {
+                    if rank(&next.0) > rank(&best.0) {
+                        next
+                    } else {
+                        best
+                    }
+                })
+                .unwrap_or((None, starts[0]))
         })
         .collect()
 }
@@ -1170,7 +1237,10 @@ fn run_stage(
     let heldout_before = nrmse_summary(&base.fitted, held_mask);
     let sse_before = block_sse(&base.fitted, sigmas, held, block);
     progress(DiagnoseProgress::Screening { stage: stage_no });
-    let screens = screen_stage(kinds, base, sigmas, localisation, settings);
+    let (screens, starts): (Vec<Option<Screening>>, Vec<Effect>) =
+        screen_stage(kinds, base, sigmas, localisation, settings)
+            .into_iter()
+            .unzip();
     // The level each candidate is judged at: α over every candidate the records can test
     // (the screened-out ones included: the screening looked at the same data).
     let family = screens
@@ -1230,8 +1300,7 @@ fn run_stage(
     });
     let refit = |k: usize| -> Refit {
         let kind = kinds[k];
-        let effect = candidate_start(kind, &base.motor, base.train, localisation);
-        let effects = base.effects.with(effect);
+        let effects = base.effects.with(starts[k]);
         let outcome = fit_output_error(
             base.train,
             &[],
@@ -1356,12 +1425,7 @@ fn run_stage(
             None => (
                 unfitted(
                     k,
-                    base.effects.with(candidate_start(
-                        kinds[k],
-                        &base.motor,
-                        base.train,
-                        localisation,
-                    )),
+                    base.effects.with(starts[k]),
                     by_score(k, Assessment::ScreenedOut),
                     None,
                 ),
