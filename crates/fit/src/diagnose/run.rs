@@ -782,6 +782,20 @@ fn candidate_starts(
     starts
 }
 
+/// The running trapezoidal integral of `speed` \[rad/s\] sampled every `dt` \[s\]: the angle
+/// \[rad\] turned since the first sample.
+fn integrated_angle(speed: &[f64], dt: f64) -> Vec<f64> {
+    let mut theta = 0.0;
+    let mut out = Vec::with_capacity(speed.len());
+    for (i, w) in speed.iter().enumerate() {
+        if i > 0 {
+            theta += 0.5 * (speed[i - 1] + w) * dt;
+        }
+        out.push(theta);
+    }
+    out
+}
+
 /// A record's peak |Ω| \[rad/s\] (from its speed, else its angle's differences).
 fn peak_speed(r: &ExcitedRecord<'_>) -> Option<f64> {
     r.speed
@@ -1115,6 +1129,17 @@ fn localise_all(
             })
         })
         .collect();
+    // A record without an encoder still turns: its angle is the running integral of its
+    // speed (trapezoids from 0 at the first sample, where the motor starts), so that ripple
+    // locked to the rotation is searched there too. The tachometer's noise integrates to a
+    // random walk of σ_Ω dt √n, far below a cogging period over a record.
+    let angles: Vec<Option<Vec<f64>>> = all
+        .iter()
+        .map(|r| match (r.position, r.speed) {
+            (None, Some(w)) => Some(integrated_angle(w, r.dt)),
+            _ => None,
+        })
+        .collect();
     let shown = super::record_names(names, all.len());
     let records: Vec<ResidualRecord<'_>> = all
         .iter()
@@ -1125,7 +1150,7 @@ fn localise_all(
             voltage: &voltages[k],
             current: Some(r.current),
             speed: speeds[k].as_deref(),
-            angle: r.position,
+            angle: r.position.or(angles[k].as_deref()),
             channels: fitted
                 .iter()
                 .filter(|c| c.record == k && c.samples.len() == r.current.len())
