@@ -25,7 +25,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seed: u64 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(1);
     let n: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(160);
     let mut settings = DiagnoseSettings::default();
-    if let Some(n) = std::env::var("WITHHELD_ITERS").ok().and_then(|s| s.parse().ok()) {
+    if let Some(n) = std::env::var("WITHHELD_ITERS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+    {
         // Iterations of every fit at most (the default bounds the time of a case).
         settings.lm.max_iters = n;
         settings.lm.max_evaluations = 5 * n;

@@ -948,8 +948,8 @@ pub fn diagnose(
         crate::checks::check_aligned(name, r.channels())?;
     }
     // The training records: whole, or with their held-out blocks excluded.
-    let masks = (validation.is_empty() || settings.split_with_validation)
-        .then(|| split(records, settings));
+    let masks =
+        (validation.is_empty() || settings.split_with_validation).then(|| split(records, settings));
     let train: Vec<ExcitedRecord<'_>> = match &masks {
         Some(m) => records
             .iter()
