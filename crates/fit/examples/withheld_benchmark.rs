@@ -105,6 +105,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 }
                 std::fs::write(path, out)?;
             }
+            for r in &d.localisation.records {
+                for c in &r.channels {
+                    if let Some(a) = &c.angle_ripple {
+                        println!(
+                            "  {} {:?}: angle ripple N {} over {} samples, p {:.2e}",
+                            r.name, c.channel, a.periods_per_rev, a.samples, a.p_value
+                        );
+                    }
+                }
+            }
             for q in &d.nominal.quality {
                 println!(
                     "  record {} {:?}: weight {:.3e}, residual RMS {:.3e}, fit {:.2} %",
