@@ -54,8 +54,8 @@ pub struct DiagnoseArgs {
     /// Further training records of any voltage waveform (repeatable).
     #[arg(long = "record", value_name = "FILE.csv")]
     pub records: Vec<PathBuf>,
-    /// Records held out whole to judge the candidates on (repeatable; default: blocks of the
-    /// training records are held out).
+    /// Records held out whole to judge the candidates on, beside the blocks of the training
+    /// records that are held out in any case (repeatable).
     #[arg(long = "validate", value_name = "FILE.csv")]
     pub validate: Vec<PathBuf>,
     /// Candidate effects, comma-separated (default: all seven of SPEC section 5).

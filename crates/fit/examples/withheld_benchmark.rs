@@ -14,7 +14,8 @@
 
 use fit::diagnose::benchmark::{diagnose_case, run_case, CaseOutcome, Summary};
 use fit::diagnose::DiagnoseSettings;
-use motor_model::withheld::benchmark_case;
+use motor_model::withheld::{benchmark_case, simulate_plant, visibility};
+use motor_model::Input;
 
 #[path = "../tests/common/diagnose_records.rs"]
 mod records;
@@ -23,15 +24,130 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let seed: u64 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(1);
     let n: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(160);
-    let settings = DiagnoseSettings::default();
+    let mut settings = DiagnoseSettings::default();
+    if let Some(n) = std::env::var("WITHHELD_ITERS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+    {
+        // Iterations of every fit at most (the default bounds the time of a case).
+        settings.lm.max_iters = n;
+        settings.lm.max_evaluations = 5 * n;
+    }
+    if std::env::var_os("WITHHELD_REFIT_ALL").is_some() {
+        // Every candidate refitted, whatever its screening score.
+        settings.refits = settings.candidates.len();
+        settings.screening_alpha = 1.0;
+    }
     if let Some(index) = args.next().map(|s| s.parse::<usize>()).transpose()? {
         let case = benchmark_case(seed, index, n)?;
         println!("case {index}: truth {:?}", case.truth());
         if std::env::var_os("WITHHELD_VERBOSE").is_some() {
             println!("{}", serde_json::to_string(&case)?);
+            // How visible the effects are on each record (training: the two steps).
+            let without = case.traces_with(&[])?;
+            let with = case.traces_with(&case.plant_effects())?;
+            let floors = case.floors();
+            for (j, r) in case.records.iter().enumerate() {
+                let seen = visibility(&with[j..=j], &without[j..=j], &floors[j..=j]);
+                // The same beside the nominal motor with the voltage's jumps moved within
+                // their sample period (the records say only between which samples they fell).
+                let dt = 1.0 / case.measurement.rate_hz;
+                let shifted = |delta: f64| -> Option<f64> {
+                    let input = match &r.input {
+                        Input::Step { volts, at_s } => Input::step(*volts, at_s + delta).ok()?,
+                        Input::Piecewise { times_s, volts } => {
+                            let levels: Vec<(f64, f64)> = times_s
+                                .iter()
+                                .map(|t| t + delta)
+                                .zip(volts.iter().copied())
+                                .collect();
+                            Input::piecewise(&levels).ok()?
+                        }
+                        _ => return None,
+                    };
+                    let plain = simulate_plant(
+                        &case.motor,
+                        &[],
+                        &input,
+                        r.duration_s,
+                        case.measurement.rate_hz,
+                    )
+                    .ok()?;
+                    Some(visibility(
+                        &with[j..=j],
+                        std::slice::from_ref(&plain),
+                        &floors[j..=j],
+                    ))
+                };
+                let best = (-20..=20)
+                    .filter_map(|q| shifted(f64::from(q) * 0.05 * dt))
+                    .fold(f64::INFINITY, f64::min);
+                println!(
+                    "  {:?}: visibility {seen:.1} noise floors ({best:.1} beside the best jump instant within ±1 sample)",
+                    r.role
+                );
+            }
         }
         let d = diagnose_case(&case, &settings)?;
+        if std::env::var_os("WITHHELD_VERBOSE").is_some() {
+            println!("nominal: {:?} ({:?})", d.nominal.params, d.nominal_note);
+            if let Some(path) = std::env::var_os("WITHHELD_DUMP") {
+                // The nominal fit's channels, one row per sample: record, channel, sample,
+                // measured, model.
+                let mut out = String::new();
+                for ch in &d.nominal.fitted {
+                    for (j, &i) in ch.samples.iter().enumerate() {
+                        out.push_str(&format!(
+                            "{},{:?},{},{},{}\n",
+                            ch.record, ch.channel, i, ch.measured[j], ch.model[j]
+                        ));
+                    }
+                }
+                std::fs::write(path, out)?;
+            }
+            for r in &d.localisation.records {
+                for c in &r.channels {
+                    if let Some(a) = &c.angle_ripple {
+                        println!(
+                            "  {} {:?}: angle ripple N {} over {} samples, p {:.2e}",
+                            r.name, c.channel, a.periods_per_rev, a.samples, a.p_value
+                        );
+                    }
+                }
+            }
+            for q in &d.nominal.quality {
+                println!(
+                    "  record {} {:?}: weight {:.3e}, residual RMS {:.3e}, fit {:.2} %",
+                    q.test, q.channel, q.noise_std, q.rms_residual, q.nrmse_fit_percent
+                );
+            }
+        }
         records::print_stages(&d);
+        if std::env::var_os("WITHHELD_VERBOSE").is_some() {
+            for stage in &d.stages {
+                for r in &stage.verdict.ranked {
+                    println!(
+                        "  ranked {:<22} held-out score {:>10.3e} gain {:>8.4} p {:.2e} held-out p {:.2e} significant {}",
+                        r.name, r.score, r.heldout_gain, r.p_value, r.heldout_p_value, r.significant
+                    );
+                }
+                println!("  level {:.2e}", stage.verdict.level);
+            }
+        }
+        return Ok(());
+    }
+    if std::env::var_os("WITHHELD_LIST").is_some() {
+        // The cases' truths and forms only, without diagnosing them.
+        for i in 0..n {
+            let case = benchmark_case(seed, i, n)?;
+            let forms: Vec<String> = case.effects.iter().map(|e| e.effect.form_label()).collect();
+            println!(
+                "{i:>4}  {:<45} {:?} visibility {:.1}",
+                case.truth().join("+"),
+                forms,
+                case.visibility
+            );
+        }
         return Ok(());
     }
     let mut outcomes: Vec<CaseOutcome> = Vec::with_capacity(n);

@@ -5,12 +5,13 @@
 //! The cases are a fixed subset of the 16 cases of seed 1 (two `none`, a sensor lag and a
 //! thermal drift in each of their two functional forms, a quadratic drag), the first seven
 //! whose diagnosis takes seconds, so that the test runs in CI; the full benchmark is the
-//! `withheld_benchmark` example. The diagnosis names the right effect on five of the seven (the
-//! sensor lag of case 0, a tenth of a sample period, and the two-node thermal drift of case 1
-//! are missed); the floor, 0.6, is met by that and failed by the diagnosis of commit 21462d2,
-//! before the voltage jumps' instants were located and projected out of the screening and
-//! refits with an undetermined effect parameter were judged (four of seven: it also missed the
-//! thermal drift of case 12).
+//! `withheld_benchmark` example. The diagnosis names the right effect on six of the seven (the
+//! sensor lag of case 0, a tenth of a sample period, is missed: to first order it is a shift of
+//! the current against the voltage, which the step's instant within its sample period explains
+//! as well); the floor, 0.8, is met by that and failed by the diagnosis of commit 41780f8,
+//! before blocks of the training records were held out beside the validation records (five of
+//! seven: it also missed the two-node thermal drift of case 1, whose held-out records it
+//! judged on the reversal and staircase alone).
 
 use fit::diagnose::benchmark::{run_case, CaseOutcome, Summary};
 use fit::diagnose::DiagnoseSettings;
@@ -23,7 +24,7 @@ const OF: usize = 16;
 /// The subset (indices into the benchmark).
 const CASES: [usize; 7] = [0, 1, 2, 3, 5, 6, 12];
 /// Top-1 accuracy the diagnosis must reach on them \[-\].
-const TOP1_FLOOR: f64 = 0.6;
+const TOP1_FLOOR: f64 = 0.8;
 
 #[test]
 fn withheld_effects_are_named_above_the_floor_and_none_raises_no_alarm() {

@@ -921,6 +921,7 @@ fn run_stage(
             extra_params: r.extra_params,
             testable: r.report.testable,
             train_statistic: r.statistic,
+            searched: 1,
             heldout_sse_before: &sse_before,
             heldout_sse_after: &r.sse,
         })

@@ -3,12 +3,16 @@
 //! on held-out data, and the same again on top of the chosen effect (a second effect present is
 //! named too).
 //!
-//! **Held-out data.** Records given as validation are held out whole. Without them every
-//! training record is cut into blocks of [`DiagnoseSettings::block_samples`] samples and every
-//! [`DiagnoseSettings::holdout_every`]-th block is left out of every fit (its samples excluded,
-//! as clipped samples are) and judged on the model's prediction there. A physical effect of a
-//! few parameters cannot learn the noise of the blocks it does not see, so a fall of the
-//! held-out error is evidence; a fall on the training blocks alone is not (SPEC section 7).
+//! **Held-out data.** Every training record is cut into blocks of
+//! [`DiagnoseSettings::block_samples`] samples and every [`DiagnoseSettings::holdout_every`]-th
+//! block is left out of every fit (its samples excluded, as clipped samples are) and judged on
+//! the model's prediction there. Records given as validation are held out whole, in addition
+//! to those blocks (unless [`DiagnoseSettings::split_with_validation`] is off): an effect the
+//! validation records do not excite (a cogging torque averaged out at speed, a Stribeck dip the
+//! records never dwell in) is still judged on held-out samples of the records that show it. A
+//! physical effect of a few parameters cannot learn the noise of the blocks it does not see, so
+//! a fall of the held-out error is evidence; a fall on the training blocks alone is not (SPEC
+//! section 7).
 //!
 //! **Voltage jumps.** The voltage column says only between which two samples a jump fell.
 //! After the nominal fit each jump is moved to the instant within that sample period where the
@@ -59,6 +63,9 @@ pub struct DiagnoseSettings {
     pub block_samples: usize,
     /// Every this many blocks one is held out (default 4: a quarter).
     pub holdout_every: usize,
+    /// Whether the training records' blocks are held out also when validation records are
+    /// given (default true: module docs).
+    pub split_with_validation: bool,
     /// The ranking's settings.
     pub verdict: VerdictSettings,
     /// The localisation's settings.
@@ -90,6 +97,7 @@ impl Default for DiagnoseSettings {
             max_effects: 2,
             block_samples: 50,
             holdout_every: 4,
+            split_with_validation: true,
             verdict: VerdictSettings::default(),
             localise: LocaliseSettings::default(),
             lm: LmSettings {
@@ -720,6 +728,87 @@ fn channel_scales(nominal: &FullFit, fitted: &[FittedChannel]) -> Vec<(usize, Ch
     sigmas
 }
 
+/// How many alternatives [`candidate_start`] picked `kind`'s fixed shape from by looking at the
+/// residual: for a cogging torque whose period count comes from the angle search, the counts
+/// that search tried ([`LocaliseSettings::max_harmonic`]); otherwise 1. Without the factor the
+/// period count that best matches the noise of an effect-free record would be named a cogging
+/// torque more often than α allows.
+fn shapes_searched(
+    kind: EffectKind,
+    localisation: &Localisation,
+    settings: &LocaliseSettings,
+) -> usize {
+    let from_angle = localisation
+        .records
+        .iter()
+        .flat_map(|r| &r.channels)
+        .any(|c| c.angle_ripple.is_some());
+    match kind {
+        EffectKind::CoggingTorque if from_angle => settings.max_harmonic.max(1) as usize,
+        _ => 1,
+    }
+}
+
+/// Stribeck speeds the screening starts from, as fractions of the slowest record's peak speed
+/// (the fit moves Ωs; the screening keeps the start whose signature explains most of the
+/// residual, so that a refit does not start a decade away from a dip near Ω = 0).
+const STRIBECK_START_FRACTIONS: [f64; 3] = [0.03, 0.1, 0.3];
+
+/// The starts of `kind` on `motor` the screening chooses among: [`candidate_start`], and for a
+/// Stribeck friction also Stribeck speeds at [`STRIBECK_START_FRACTIONS`] of the slowest
+/// record's peak speed.
+fn candidate_starts(
+    kind: EffectKind,
+    motor: &MotorParams,
+    records: &[ExcitedRecord<'_>],
+    localisation: &Localisation,
+) -> Vec<Effect> {
+    let first = candidate_start(kind, motor, records, localisation);
+    let mut starts = vec![first];
+    if let Effect::StribeckFriction(s) = first {
+        let w_slowest = records
+            .iter()
+            .filter_map(peak_speed)
+            .fold(f64::INFINITY, f64::min);
+        if w_slowest.is_finite() && w_slowest > 0.0 {
+            starts.extend(STRIBECK_START_FRACTIONS.iter().map(|&x| {
+                Effect::StribeckFriction(StribeckFriction {
+                    stribeck_speed_rad_s: x * w_slowest,
+                    ..s
+                })
+            }));
+        }
+    }
+    starts
+}
+
+/// The running trapezoidal integral of `speed` \[rad/s\] sampled every `dt` \[s\]: the angle
+/// \[rad\] turned since the first sample.
+fn integrated_angle(speed: &[f64], dt: f64) -> Vec<f64> {
+    let mut theta = 0.0;
+    let mut out = Vec::with_capacity(speed.len());
+    for (i, w) in speed.iter().enumerate() {
+        if i > 0 {
+            theta += 0.5 * (speed[i - 1] + w) * dt;
+        }
+        out.push(theta);
+    }
+    out
+}
+
+/// A record's peak |Ω| \[rad/s\] (from its speed, else its angle's differences).
+fn peak_speed(r: &ExcitedRecord<'_>) -> Option<f64> {
+    r.speed
+        .map(|s| s.iter().fold(0.0_f64, |m, v| m.max(v.abs())))
+        .or_else(|| {
+            r.position.map(|p| {
+                p.windows(2)
+                    .map(|w| ((w[1] - w[0]) / r.dt).abs())
+                    .fold(0.0_f64, f64::max)
+            })
+        })
+}
+
 /// A small starting size of `kind` on `motor`, its shape from the records.
 fn candidate_start(
     kind: EffectKind,
@@ -730,18 +819,7 @@ fn candidate_start(
     let peak = |f: &dyn Fn(&ExcitedRecord<'_>) -> Option<f64>| {
         records.iter().filter_map(f).fold(0.0_f64, f64::max)
     };
-    let w_max = peak(&|r| {
-        r.speed
-            .map(|s| s.iter().fold(0.0_f64, |m, v| m.max(v.abs())))
-            .or_else(|| {
-                r.position.map(|p| {
-                    p.windows(2)
-                        .map(|w| ((w[1] - w[0]) / r.dt).abs())
-                        .fold(0.0_f64, f64::max)
-                })
-            })
-    })
-    .max(1e-3);
+    let w_max = peak(&peak_speed).max(1e-3);
     let i_max = peak(&|r| Some(r.current.iter().fold(0.0_f64, |m, v| m.max(v.abs())))).max(1e-6);
     let dt = records.iter().map(|r| r.dt).fold(f64::INFINITY, f64::min);
     let span = peak(&|r| Some(r.current.len() as f64 * r.dt));
@@ -870,7 +948,8 @@ pub fn diagnose(
         crate::checks::check_aligned(name, r.channels())?;
     }
     // The training records: whole, or with their held-out blocks excluded.
-    let masks = validation.is_empty().then(|| split(records, settings));
+    let masks =
+        (validation.is_empty() || settings.split_with_validation).then(|| split(records, settings));
     let train: Vec<ExcitedRecord<'_>> = match &masks {
         Some(m) => records
             .iter()
@@ -890,17 +969,23 @@ pub fn diagnose(
         None => records
             .iter()
             .map(|r| vec![false; r.current.len()])
-            .chain(validation.iter().map(|r| vec![true; r.current.len()]))
             .collect(),
-    };
-    let heldout = match &masks {
-        Some(_) => format!(
-            "no validation record: every {}th block of {} samples of each record held out ({} %)",
+    }
+    .into_iter()
+    .chain(validation.iter().map(|r| vec![true; r.current.len()]))
+    .collect();
+    let blocks = || {
+        format!(
+            "every {}th block of {} samples of each record held out ({} %)",
             settings.holdout_every.max(2),
             settings.block_samples.max(1),
             100 / settings.holdout_every.max(2)
-        ),
-        None => format!("{} validation record(s) held out whole", validation.len()),
+        )
+    };
+    let heldout = match (&masks, validation.len()) {
+        (Some(_), 0) => format!("no validation record: {}", blocks()),
+        (Some(_), n) => format!("{n} validation record(s) held out whole, and {}", blocks()),
+        (None, n) => format!("{n} validation record(s) held out whole"),
     };
 
     progress(DiagnoseProgress::Nominal);
@@ -1044,6 +1129,17 @@ fn localise_all(
             })
         })
         .collect();
+    // A record without an encoder still turns: its angle is the running integral of its
+    // speed (trapezoids from 0 at the first sample, where the motor starts), so that ripple
+    // locked to the rotation is searched there too. The tachometer's noise integrates to a
+    // random walk of σ_Ω dt √n, far below a cogging period over a record.
+    let angles: Vec<Option<Vec<f64>>> = all
+        .iter()
+        .map(|r| match (r.position, r.speed) {
+            (None, Some(w)) => Some(integrated_angle(w, r.dt)),
+            _ => None,
+        })
+        .collect();
     let shown = super::record_names(names, all.len());
     let records: Vec<ResidualRecord<'_>> = all
         .iter()
@@ -1054,7 +1150,7 @@ fn localise_all(
             voltage: &voltages[k],
             current: Some(r.current),
             speed: speeds[k].as_deref(),
-            angle: r.position,
+            angle: r.position.or(angles[k].as_deref()),
             channels: fitted
                 .iter()
                 .filter(|c| c.record == k && c.samples.len() == r.current.len())
@@ -1074,15 +1170,17 @@ fn localise_all(
 type Refit = (CandidateReport, Vec<f64>, Option<f64>);
 
 /// The screening of `kinds` on top of `base` (see [`crate::diagnose::screen`]), in their
-/// order: `None` for a candidate whose signature could not be simulated, and for every one
-/// when the base model cannot be linearised (those are refitted unscreened).
+/// order, each with the start its refit begins from (of [`candidate_starts`], the testable one
+/// of largest statistic): `None` for a candidate whose signature could not be simulated, and
+/// for every one when the base model cannot be linearised (those are refitted unscreened, from
+/// [`candidate_start`]).
 fn screen_stage(
     kinds: &[EffectKind],
     base: &Base<'_>,
     sigmas: &[(usize, Channel, f64)],
     localisation: &Localisation,
     settings: &DiagnoseSettings,
-) -> Vec<Option<Screening>> {
+) -> Vec<(Option<Screening>, Effect)> {
     let factor = settings.step_factor;
     let projection =
         output_error_sensitivity(base.train, &base.motor, &base.effects, sigmas, None, factor)
@@ -1093,23 +1191,53 @@ fn screen_stage(
                 BaseProjection::new(&lin.residuals, &jacobian, &lin.series)
             });
     let Some(projection) = projection else {
-        return vec![None; kinds.len()];
+        return kinds
+            .iter()
+            .map(|&kind| {
+                (
+                    None,
+                    candidate_start(kind, &base.motor, base.train, localisation),
+                )
+            })
+            .collect();
     };
     kinds
         .iter()
         .map(|&kind| {
-            let effect = candidate_start(kind, &base.motor, base.train, localisation);
-            let effects = base.effects.with(effect);
-            output_error_sensitivity(
-                base.train,
-                &base.motor,
-                &effects,
-                sigmas,
-                Some(kind),
-                factor,
-            )
-            .ok()
-            .map(|sig| projection.score(&sig.jacobian))
+            let starts = candidate_starts(kind, &base.motor, base.train, localisation);
+            let scored: Vec<(Option<Screening>, Effect)> = starts
+                .iter()
+                .map(|&effect| {
+                    let effects = base.effects.with(effect);
+                    let score = output_error_sensitivity(
+                        base.train,
+                        &base.motor,
+                        &effects,
+                        sigmas,
+                        Some(kind),
+                        factor,
+                    )
+                    .ok()
+                    .map(|sig| projection.score(&sig.jacobian));
+                    (score, effect)
+                })
+                .collect();
+            // The first start unless another is testable with a larger statistic.
+            let rank = |x: &Option<Screening>| {
+                x.filter(|s| s.testable)
+                    .map_or(f64::NEG_INFINITY, |s| s.statistic)
+            };
+            scored
+                .iter()
+                .copied()
+                .reduce(|best, next| {
+                    if rank(&next.0) > rank(&best.0) {
+                        next
+                    } else {
+                        best
+                    }
+                })
+                .unwrap_or((None, starts[0]))
         })
         .collect()
 }
@@ -1134,7 +1262,10 @@ fn run_stage(
     let heldout_before = nrmse_summary(&base.fitted, held_mask);
     let sse_before = block_sse(&base.fitted, sigmas, held, block);
     progress(DiagnoseProgress::Screening { stage: stage_no });
-    let screens = screen_stage(kinds, base, sigmas, localisation, settings);
+    let (screens, starts): (Vec<Option<Screening>>, Vec<Effect>) =
+        screen_stage(kinds, base, sigmas, localisation, settings)
+            .into_iter()
+            .unzip();
     // The level each candidate is judged at: α over every candidate the records can test
     // (the screened-out ones included: the screening looked at the same data).
     let family = screens
@@ -1194,8 +1325,7 @@ fn run_stage(
     });
     let refit = |k: usize| -> Refit {
         let kind = kinds[k];
-        let effect = candidate_start(kind, &base.motor, base.train, localisation);
-        let effects = base.effects.with(effect);
+        let effects = base.effects.with(starts[k]);
         let outcome = fit_output_error(
             base.train,
             &[],
@@ -1320,12 +1450,7 @@ fn run_stage(
             None => (
                 unfitted(
                     k,
-                    base.effects.with(candidate_start(
-                        kinds[k],
-                        &base.motor,
-                        base.train,
-                        localisation,
-                    )),
+                    base.effects.with(starts[k]),
                     by_score(k, Assessment::ScreenedOut),
                     None,
                 ),
@@ -1336,11 +1461,13 @@ fn run_stage(
         .collect();
     let scores: Vec<CandidateScore<'_>> = results
         .iter()
-        .map(|(c, sse, statistic)| CandidateScore {
+        .zip(kinds)
+        .map(|((c, sse, statistic), &kind)| CandidateScore {
             name: c.name,
             extra_params: c.params.len(),
             testable: c.testable,
             train_statistic: *statistic,
+            searched: shapes_searched(kind, localisation, &settings.localise),
             heldout_sse_before: &sse_before,
             heldout_sse_after: sse,
         })

@@ -9,7 +9,9 @@
 //!   candidate's residuals (correlated residuals inflate the fall a chance fit achieves),
 //!   against χ² with as many degrees of freedom as the effect adds, at `α / m` for `m`
 //!   candidates (Bonferroni, so that the chance of naming any effect when none is present stays
-//!   below α);
+//!   below α); a candidate whose fixed shape was picked from the residual among several (a
+//!   cogging torque's period count, the best of those the angle search tried) has its p-value
+//!   multiplied by their number ([`CandidateScore::searched`]), Bonferroni again;
 //! - on the held-out data, cut into blocks, the weighted sum of squared residuals per block
 //!   before and after: the improvement `Σ d_b` (`d_b = before_b − after_b`) must exceed the
 //!   parameter penalty — a fall on training data alone is not evidence (SPEC section 7); its
@@ -38,6 +40,9 @@ pub struct CandidateScore<'a> {
     /// The training likelihood-ratio statistic, corrected for the residuals' correlation (module
     /// docs); `None` when it could not be computed.
     pub train_statistic: Option<f64>,
+    /// How many alternatives the candidate's fixed shape parameters were picked from by
+    /// looking at the residual (1 when none was): its p-value is multiplied by this.
+    pub searched: usize,
     /// Held-out weighted squared error per block without the effect \[noise variances\].
     pub heldout_sse_before: &'a [f64],
     /// The same blocks with the effect fitted \[noise variances\].
@@ -137,7 +142,8 @@ pub fn rank_candidates(candidates: &[CandidateScore<'_>], settings: &VerdictSett
             };
             let p_value = match c.train_statistic {
                 Some(x) if c.testable && x.is_finite() => {
-                    chi_square_sf(x, c.extra_params.max(1) as f64)
+                    (chi_square_sf(x, c.extra_params.max(1) as f64) * c.searched.max(1) as f64)
+                        .min(1.0)
                 }
                 _ => 1.0,
             };
@@ -209,6 +215,7 @@ mod tests {
             extra_params: 1,
             testable: true,
             train_statistic: Some(train_statistic),
+            searched: 1,
             heldout_sse_before: before,
             heldout_sse_after: after,
         }
