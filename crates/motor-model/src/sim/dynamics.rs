@@ -185,7 +185,7 @@ impl Dynamics for CoggingTorque {
     /// grows as `A N³ |Ω|³ h⁴/J`: at any lower speed it is smaller.
     fn step_limit(&self, p: &MotorParams, speed: f64, tolerance: Option<f64>) -> f64 {
         let w = speed.abs() * f64::from(self.periods_per_rev);
-        if !(w > 0.0) {
+        if w.is_nan() || w <= 0.0 {
             return f64::INFINITY;
         }
         let fine = std::f64::consts::TAU / w / STEPS_PER_COGGING_PERIOD;
