@@ -54,6 +54,9 @@ const MAX_STEPS_PER_SAMPLE: f64 = 200.0;
 /// Speed bound of the simulations over the largest measured |speed| (room for the fitted
 /// motor to run faster than the records while the step stays fixed).
 const SPEED_BOUND_MARGIN: f64 = 1.5;
+/// Share of the records' noise floor the integration error an effect causes at speed (the
+/// cogging ripple) may reach ([`Simulator::with_speed_bound_and_tolerance`]).
+const SPEED_ERROR_SHARE: f64 = 0.01;
 /// A voltage is piecewise constant when it has at most one jump per this many samples.
 const MIN_SAMPLES_PER_LEVEL: usize = 20;
 
@@ -225,6 +228,10 @@ struct OeProblem {
     /// follow the simulated speed ([`Simulator::with_speed_bound`]); `None` without a speed
     /// channel.
     speed_bound: Option<f64>,
+    /// The smallest noise floor \[A\] and \[rad/s\] of the records' current and speed
+    /// channels, from their own scatter ([`noise_std`]): the integration error at speed is
+    /// held to [`SPEED_ERROR_SHARE`] of it.
+    noise_floor: (f64, f64),
     /// RK4 steps this many times the simulator's default ([`Simulator::with_step_factor`]; 1
     /// for every fit but the diagnosis's).
     step_factor: f64,
@@ -257,8 +264,17 @@ impl OeProblem {
             .fold(0.0f64, |m, w| m.max(w.abs()));
         let speed_bound =
             (peak_speed > 0.0 && peak_speed.is_finite()).then_some(SPEED_BOUND_MARGIN * peak_speed);
+        let floor = |current: bool| {
+            records
+                .iter()
+                .flat_map(|r| &r.channels)
+                .filter(|c| (c.kind == Channel::Current) == current)
+                .map(|c| c.sigma)
+                .fold(f64::INFINITY, f64::min)
+        };
         Ok(OeProblem {
             parameters: Parameters::new(effects),
+            noise_floor: (floor(true), floor(false)),
             records,
             n_residuals,
             max_step_bits,
@@ -376,14 +392,27 @@ impl OeProblem {
         if self.step_factor != 1.0 {
             sim = sim.with_step_factor(self.step_factor)?;
         }
-        match self.speed_bound {
-            Some(w) => sim.with_speed_bound(w),
-            None => Ok(sim),
+        match (self.speed_bound, self.speed_tolerance(&motor)) {
+            (Some(w), Some(tol)) => sim.with_speed_bound_and_tolerance(w, tol),
+            (Some(w), None) => sim.with_speed_bound(w),
+            (None, _) => Ok(sim),
         }
     }
 
+    /// The speed error \[rad/s\] the integration at speed may cause on `motor`:
+    /// [`SPEED_ERROR_SHARE`] of the speed channels' noise floor, and of the current's through
+    /// the back-EMF (a speed error `e` moves the current by at most `k e/R`); `None` without
+    /// a positive floor.
+    fn speed_tolerance(&self, motor: &MotorParams) -> Option<f64> {
+        let (current_a, speed_rad_s) = self.noise_floor;
+        let via_current = current_a * motor.r_ohm / motor.k_nm_per_a;
+        let tol = SPEED_ERROR_SHARE * speed_rad_s.min(via_current);
+        (tol > 0.0 && tol.is_finite()).then_some(tol)
+    }
+
     /// The RK4 step \[s\] for `motor` and `effects`: the simulator's own (1/40 of the fastest
-    /// time constant, and of a cogging period at the speed bound) with a margin.
+    /// time constant, and the cogging step at the speed bound that keeps the ripple's error
+    /// within [`OeProblem::speed_tolerance`]) with a margin.
     fn step_for(&self, motor: &MotorParams, effects: &Effects) -> Option<f64> {
         let step = Input::Step {
             volts: 1.0,

@@ -37,6 +37,7 @@ use motor_model::{
     Input, MotorParams, QuadraticDrag, StribeckFriction, ThermalDrift, COPPER_ALPHA_PER_K,
 };
 use nalgebra::DMatrix;
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::diagnose::localise::{
@@ -73,7 +74,9 @@ pub struct DiagnoseSettings {
     /// The solver's settings for every fit (default: the solver's, converged at a relative
     /// cost fall of 1e-8 and stopped after 60 iterations).
     pub lm: LmSettings,
-    /// Candidates refitted at the same time (default: the machine's parallelism).
+    /// Whether candidates are refitted at the same time: above 1 (the default: the machine's
+    /// parallelism) they share rayon's pool (one thread per core) with the simulations of
+    /// their Jacobians; at 1 or 0 they are refitted one after the other.
     pub threads: usize,
     /// Candidates refitted in full at each stage, the best by their screening score (default
     /// 2; the others are reported with their score alone). At least the number of candidates
@@ -1412,37 +1415,30 @@ fn run_stage(
         });
         report
     };
-    // The refits in parallel, at most `threads` at a time.
-    let threads = settings.threads.max(1);
-    let mut refitted: Vec<(usize, Refit)> = Vec::with_capacity(refit_set.len());
-    for chunk in refit_set.chunks(threads) {
-        let part: Vec<(usize, Refit)> = std::thread::scope(|scope| {
-            let handles: Vec<_> = chunk
-                .iter()
-                .map(|&k| scope.spawn(move || refit(k)))
-                .collect();
-            handles
-                .into_iter()
-                .zip(chunk)
-                .map(|(h, &k)| {
-                    let result = h.join().unwrap_or_else(|_| {
-                        (
-                            unfitted(
-                                k,
-                                base.effects,
-                                by_score(k, Assessment::Unresolved),
-                                Some("the refit stopped unexpectedly".into()),
-                            ),
-                            Vec::new(),
-                            None,
-                        )
-                    });
-                    (k, result)
-                })
-                .collect()
-        });
-        refitted.extend(part);
-    }
+    // The refits in parallel on rayon's pool, which the output-error Jacobians inside them
+    // share (one thread per core, no threads started within threads); one after the other
+    // with `threads` ≤ 1. A refit that panics is reported as stopped, not propagated.
+    let guarded = |k: usize| -> (usize, Refit) {
+        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| refit(k)))
+            .unwrap_or_else(|_| {
+                (
+                    unfitted(
+                        k,
+                        base.effects,
+                        by_score(k, Assessment::Unresolved),
+                        Some("the refit stopped unexpectedly".into()),
+                    ),
+                    Vec::new(),
+                    None,
+                )
+            });
+        (k, result)
+    };
+    let mut refitted: Vec<(usize, Refit)> = if settings.threads > 1 {
+        refit_set.par_iter().map(|&k| guarded(k)).collect()
+    } else {
+        refit_set.iter().map(|&k| guarded(k)).collect()
+    };
     // Every candidate in the order given: refitted, or reported with its screening score.
     let results: Vec<Refit> = (0..kinds.len())
         .map(|k| match refitted.iter().position(|(j, _)| *j == k) {

@@ -16,8 +16,17 @@ use super::effects::{
 };
 use crate::params::MotorParams;
 
-/// RK4 steps per cogging period at the speed bound (or the current speed).
+/// RK4 steps per cogging period at the speed bound (or the current speed) when no speed
+/// tolerance is given: the error on the speed ripple is then 2e-7 of the ripple.
 const STEPS_PER_COGGING_PERIOD: f64 = 40.0;
+/// Largest advance of the cogging phase `N θ` over one RK4 step \[rad\] with a speed
+/// tolerance: a quarter period (4 steps a period, RK4's error on the ripple 2.3e-3 of the
+/// ripple), far from the aliasing of a step near a whole period.
+const MAX_COGGING_PHASE_PER_STEP: f64 = std::f64::consts::FRAC_PI_2;
+/// RK4 on the ripple of a torque `A sin(ω t)` is Simpson's rule on each step: its relative
+/// error on the ripple is `(ω h)⁴/2880` (to 8 % up to `ω h = π/2`); half of that constant, for
+/// the coupling of the ripple with the angle it follows.
+const SIMPSON_RIPPLE_CONSTANT: f64 = 1440.0;
 
 /// An effect's part in the plant's equations (module docs). Every method has the neutral
 /// default (no change to the nominal model).
@@ -74,8 +83,10 @@ pub(crate) trait Dynamics {
     fn own_rate(&self, _p: &MotorParams) -> f64 {
         0.0
     }
-    /// Longest RK4 step \[s\] at speeds up to `speed` \[rad/s\] in magnitude.
-    fn step_limit(&self, _speed: f64) -> f64 {
+    /// Longest RK4 step \[s\] at speeds up to `speed` \[rad/s\] in magnitude on motor `p`;
+    /// with `tolerance` \[rad/s\], the longest at which the integration error the effect
+    /// causes in the speed stays below it.
+    fn step_limit(&self, _p: &MotorParams, _speed: f64, _tolerance: Option<f64>) -> f64 {
         f64::INFINITY
     }
 }
@@ -142,8 +153,8 @@ impl Dynamics for Effect {
     fn own_rate(&self, p: &MotorParams) -> f64 {
         on_effect!(self, e => e.own_rate(p))
     }
-    fn step_limit(&self, speed: f64) -> f64 {
-        on_effect!(self, e => e.step_limit(speed))
+    fn step_limit(&self, p: &MotorParams, speed: f64, tolerance: Option<f64>) -> f64 {
+        on_effect!(self, e => e.step_limit(p, speed, tolerance))
     }
 }
 
@@ -167,14 +178,29 @@ impl Dynamics for CoggingTorque {
     fn own_rate(&self, p: &MotorParams) -> f64 {
         (self.amplitude_nm * f64::from(self.periods_per_rev) / p.j_kgm2).sqrt()
     }
-    /// 1/40 of a cogging period at `speed`.
-    fn step_limit(&self, speed: f64) -> f64 {
+    /// 1/40 of a cogging period at `speed`; with `tolerance`, the step at which RK4's error
+    /// on the speed ripple at `speed`, `(ω h)⁴/2880` of the ripple `A/(J ω)` (ω = N |Ω| the
+    /// ripple's pulsation; Simpson's rule, [`SIMPSON_RIPPLE_CONSTANT`]), is `tolerance`, the
+    /// ripple advancing at most a quarter period a step and never less than 1/40. The error
+    /// grows as `A N³ |Ω|³ h⁴/J`: at any lower speed it is smaller.
+    fn step_limit(&self, p: &MotorParams, speed: f64, tolerance: Option<f64>) -> f64 {
         let w = speed.abs() * f64::from(self.periods_per_rev);
-        if w > 0.0 {
-            std::f64::consts::TAU / w / STEPS_PER_COGGING_PERIOD
-        } else {
-            f64::INFINITY
+        if w.is_nan() || w <= 0.0 {
+            return f64::INFINITY;
         }
+        let fine = std::f64::consts::TAU / w / STEPS_PER_COGGING_PERIOD;
+        let Some(tol) = tolerance.filter(|t| *t > 0.0 && t.is_finite()) else {
+            return fine;
+        };
+        let ripple = self.amplitude_nm / (p.j_kgm2 * w);
+        let phase = if ripple > 0.0 {
+            (SIMPSON_RIPPLE_CONSTANT * tol / ripple)
+                .powf(0.25)
+                .min(MAX_COGGING_PHASE_PER_STEP)
+        } else {
+            MAX_COGGING_PHASE_PER_STEP
+        };
+        (phase / w).max(fine)
     }
 }
 
