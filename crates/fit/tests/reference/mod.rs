@@ -304,14 +304,28 @@ fn covered(fit: &fit::FullFit, truth: &Motor, inside: &mut [usize; 6]) {
     }
 }
 
+/// The output-error fit's view of a whole logged record (current and encoder angle) driven by
+/// `input`, sampled every `dt` \[s\].
+fn excited<'a>(input: &'a motor_model::Input, dt: f64, rec: &'a Logged) -> fit::ExcitedRecord<'a> {
+    fit::ExcitedRecord {
+        input,
+        dt,
+        current: &rec.current,
+        speed: None,
+        position: Some(&rec.angle),
+        exclude_current: None,
+        exclude_speed: None,
+    }
+}
+
 /// Coverage of the full step-pair fit's 95 % intervals over `runs` record pairs (40 V and
 /// 2.5 V, 50 s at 1 kHz; with `return_to_zero` each back to 0 V after 50 s and recorded for
 /// 100 s, fitted whole): how many runs each interval contained the truth, and the runs whose
 /// fit gave intervals. The pipeline's own route ([`fit::identify_step_pair`]).
 pub fn step_pair_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], usize) {
     use fit::{
-        identify_step_pair, locate_step_with, voltage_levels, ExcitedRecord, LmSettings,
-        StepMethod, StepRecord, StepTest, WholeRecord,
+        identify_step_pair, locate_step_with, voltage_levels, LmSettings, StepMethod, StepRecord,
+        StepTest, WholeRecord,
     };
     let dt = 1e-3;
     let hold = 50_000;
@@ -377,15 +391,7 @@ pub fn step_pair_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], usi
                 },
                 inputs: *inputs,
                 whole: levels.as_ref().map(|(input, priors)| WholeRecord {
-                    record: ExcitedRecord {
-                        input,
-                        dt,
-                        current: &rec.current,
-                        speed: None,
-                        position: Some(&rec.angle),
-                        exclude_current: None,
-                        exclude_speed: None,
-                    },
+                    record: excited(input, dt, rec),
                     priors,
                 }),
             })
@@ -411,8 +417,7 @@ pub fn step_pair_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], usi
 /// −20 V, 0 V, 2.5 V over 140 s; or 40 V then 0 V over 150 s with `return_to_zero`).
 pub fn output_error_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], usize) {
     use fit::{
-        equation_error_start, identify_output_error_with_inputs, voltage_levels, ExcitedRecord,
-        LmSettings,
+        equation_error_start, identify_output_error_with_inputs, voltage_levels, LmSettings,
     };
     let dt = 1e-3;
     let mut inside = [0; 6];
@@ -453,15 +458,7 @@ pub fn output_error_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], 
         );
         let t: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
         let (u, priors) = voltage_levels(&t, &rec.voltage, Some(rec.voltage_lsb)).expect("levels");
-        let records = [ExcitedRecord {
-            input: &u,
-            dt,
-            current: &rec.current,
-            speed: None,
-            position: Some(&rec.angle),
-            exclude_current: None,
-            exclude_speed: None,
-        }];
+        let records = [excited(&u, dt, &rec)];
         let start = equation_error_start(&records).expect("start");
         let fit =
             identify_output_error_with_inputs(&records, &[priors], &start, LmSettings::default())
