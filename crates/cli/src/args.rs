@@ -242,6 +242,11 @@ pub struct MontecarloArgs {
     /// between two ADC codes differs from run to run.
     #[arg(long)]
     pub vary_range: bool,
+    /// Return each step to 0 V after --duration (at a random instant within a sample period
+    /// with --subsample-step) and record as long again: each record ends at 0 V, on a voltage
+    /// range whose lower rail is 0 V; the full method fits the rise and the fall.
+    #[arg(long)]
+    pub return_to_zero: bool,
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,

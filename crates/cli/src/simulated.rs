@@ -2,9 +2,7 @@
 //! through [`MeasurementModel::logger`], and the metadata that describes a simulated record.
 
 use anyhow::Result;
-use motor_model::{
-    Adc, Effects, Input, MeasurementModel, MotorParams, Range, Record, StepResponse,
-};
+use motor_model::{Adc, Effects, Input, MeasurementModel, MotorParams, Range, Record};
 
 use crate::settings::Logger;
 use crate::steps::{step_from_record_with, LoadedStep};
@@ -19,23 +17,65 @@ pub fn measured_step(
     at_s: f64,
     seed: u64,
 ) -> Result<(Record, MeasurementModel)> {
-    measured_step_with(logger, (None, 1.0), motor, volts, at_s, seed)
+    measured_step_with(
+        logger,
+        (None, 1.0),
+        motor,
+        volts,
+        StepTiming::step(at_s),
+        seed,
+    )
+}
+
+/// When a simulated step is applied and, for a step that returns to 0 V, when it ends.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepTiming {
+    /// Step instant \[s\] from the record's start.
+    pub at_s: f64,
+    /// Instant the voltage returns to 0 V \[s\] from the record's start, if it does.
+    pub fall_at_s: Option<f64>,
+}
+
+impl StepTiming {
+    /// A step at `at_s` \[s\] held to the record's end.
+    pub fn step(at_s: f64) -> Self {
+        StepTiming {
+            at_s,
+            fall_at_s: None,
+        }
+    }
+
+    /// The voltage waveform of a step of `volts` \[V\] with this timing.
+    fn input(self, volts: f64) -> Result<Input> {
+        match self.fall_at_s {
+            None => Input::step(volts, self.at_s),
+            Some(fall) => Input::piecewise(&[(self.at_s, volts), (fall, 0.0)]),
+        }
+        .map_err(|e| BadInput(e.to_string()).into())
+    }
 }
 
 /// [`measured_step`] with `voltage_noise_lsb` \[LSB\] of noise on the voltage channel instead
-/// of the logger's `noise_lsb`, if given, and every conditioning range stretched by
-/// `range_scale` \[-\] (≥ 1: the signals sit elsewhere between the ADC's codes).
+/// of the logger's `noise_lsb`, if given, every conditioning range stretched by `range_scale`
+/// \[-\] (≥ 1: the signals sit elsewhere between the ADC's codes), and the step's `timing`
+/// (a return to 0 V included: the exact response of the piecewise-constant voltage,
+/// [`motor_model::simulate`]).
 pub fn measured_step_with(
     logger: &Logger,
     (voltage_noise_lsb, range_scale): (Option<f64>, f64),
     motor: &MotorParams,
     volts: f64,
-    at_s: f64,
+    timing: StepTiming,
     seed: u64,
 ) -> Result<(Record, MeasurementModel)> {
-    let trace = StepResponse::new(motor, volts)
-        .trace(at_s, logger.duration_s, logger.rate_hz)
-        .map_err(|e| BadInput(e.to_string()))?;
+    let trace = motor_model::simulate(
+        motor,
+        Effects::none(),
+        &timing.input(volts)?,
+        logger.duration_s,
+        logger.rate_hz,
+    )
+    .map_err(|e| BadInput(e.to_string()))?;
     let mut ranges = [&trace.voltage, &trace.current, &trace.speed].map(|s| Range::covering(s));
     for r in &mut ranges {
         *r = Range::new(r.lo * range_scale, r.hi * range_scale)
@@ -60,21 +100,28 @@ pub fn measured_step_with(
 
 /// A step of `volts` on `motor` recorded by `logger` with noise seed `seed`, located.
 pub fn record(logger: &Logger, motor: &MotorParams, volts: f64, seed: u64) -> Result<LoadedStep> {
-    record_at(logger, (None, 1.0), motor, volts, 0.0, seed)
+    record_at(
+        logger,
+        (None, 1.0),
+        motor,
+        volts,
+        StepTiming::step(0.0),
+        seed,
+    )
 }
 
-/// A step of `volts` at `at_s` \[s\] on `motor` recorded by `logger` (with
-/// `voltage_noise_lsb` on the voltage if given, ranges stretched by `range_scale`) with noise
-/// seed `seed`, located.
+/// A step of `volts` with `timing` on `motor` recorded by `logger` (with `voltage_noise_lsb`
+/// on the voltage if given, ranges stretched by `range_scale`) with noise seed `seed`,
+/// located.
 pub fn record_at(
     logger: &Logger,
     chain: (Option<f64>, f64),
     motor: &MotorParams,
     volts: f64,
-    at_s: f64,
+    timing: StepTiming,
     seed: u64,
 ) -> Result<LoadedStep> {
-    let (rec, model) = measured_step_with(logger, chain, motor, volts, at_s, seed)?;
+    let (rec, model) = measured_step_with(logger, chain, motor, volts, timing, seed)?;
     let lsb = |c: usize| model.adc.zip(model.ranges[c]).map(|(adc, r)| adc.lsb(r));
     let mut step = step_from_record_with(
         format!("simulated {volts} V record (seed {seed})"),

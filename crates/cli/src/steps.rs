@@ -12,7 +12,7 @@ use fit::{
     ClippingVerdict, CurrentChannel, DetectedInitialState, ExcitedRecord, FeedforwardFit,
     FeedforwardSettings, FullFit, InitialState, LevelPrior, LmSettings, MeasuredChannels,
     RecordChannel, SpeedRecord, StartChannels, StepInputs, StepMethod, StepPairIdentification,
-    StepRecord, StepTest,
+    StepRecord, StepTest, WholeRecord,
 };
 use motor_model::{Effects, Input, MotorParams, Record};
 
@@ -38,6 +38,12 @@ pub struct LoadedStep {
     exclude_speed: Option<Vec<bool>>,
     /// What the record leaves unknown about the step (height and instant).
     pub inputs: StepInputs,
+    /// Samples of the step's level, from the step on: all of them, or those before the
+    /// voltage came back down ([`fit::StepLocation::fall`]).
+    rise: usize,
+    /// The whole record, its voltage rebuilt as levels, for a step that comes back down (a
+    /// return to 0 V): the full method fits the rise and the fall.
+    pub whole: Option<LoadedExcited>,
     /// How the whole record starts, from its first samples (`None` where they cannot tell:
     /// taken as rest, as the step methods assume).
     pub initial: Option<DetectedInitialState>,
@@ -46,32 +52,45 @@ pub struct LoadedStep {
 }
 
 impl LoadedStep {
-    /// The identification's view of the record.
+    /// The identification's view of the record: from the step on, up to the voltage's return
+    /// if it comes back down.
     pub fn test(&self) -> StepTest<'_> {
+        fn first<T>(v: &[T], n: usize) -> &[T] {
+            &v[..n.min(v.len())]
+        }
+        let n = self.rise;
         StepTest {
             volts: self.volts,
             t_first: 0.0,
             dt: self.dt,
-            current: &self.current,
-            speed: self.speed.as_deref(),
-            position: self.position.as_deref(),
-            exclude_current: self.exclude_current.as_deref(),
-            exclude_speed: self.exclude_speed.as_deref(),
+            current: first(&self.current, n),
+            speed: self.speed.as_deref().map(|v| first(v, n)),
+            position: self.position.as_deref().map(|v| first(v, n)),
+            exclude_current: self.exclude_current.as_deref().map(|v| first(v, n)),
+            exclude_speed: self.exclude_speed.as_deref().map(|v| first(v, n)),
         }
     }
 
-    /// The time of each sample kept \[s\], from the step on (the fits' sample times).
+    /// The time of each sample fitted \[s\]: from the step on, or from the record's first
+    /// sample for a step that comes back down (the full fit's sample times).
     pub fn times(&self) -> Vec<f64> {
-        (0..self.current.len())
-            .map(|i| i as f64 * self.dt)
-            .collect()
+        let n = self
+            .whole
+            .as_ref()
+            .map_or(self.current.len(), |w| w.record.current.len());
+        (0..n).map(|i| i as f64 * self.dt).collect()
     }
 
-    /// The step-pair pipeline's view of the record: the test and its uncertain inputs.
+    /// The step-pair pipeline's view of the record: the test, its uncertain inputs and, for a
+    /// step that comes back down, the whole record.
     pub fn step_record(&self) -> StepRecord<'_> {
         StepRecord {
             test: self.test(),
             inputs: self.inputs,
+            whole: self.whole.as_ref().map(|w| WholeRecord {
+                record: w.excited(),
+                priors: &w.priors,
+            }),
         }
     }
 }
@@ -185,9 +204,16 @@ fn read_step(path: &Path, map: &ColumnMap) -> (Vec<String>, Result<LoadedStep>) 
         step.inputs.current_lsb_a = loaded.current_lsb.unwrap_or(0.0);
         step.path = shown;
         let from = loaded.lines.len() - step.current.len();
+        let tachometer = step.position.is_none();
+        if let Some(whole) = &mut step.whole {
+            whole.exclude_current.clone_from(&masks.current);
+            if tachometer {
+                whole.exclude_speed.clone_from(&masks.speed);
+            }
+        }
         step.exclude_current = masks.current.map(|m| m[from..].to_vec());
         // The encoder speed has no ADC: only a tachometer column can be clipped.
-        if step.position.is_none() {
+        if tachometer {
             step.exclude_speed = masks.speed.map(|m| m[from..].to_vec());
         }
         Ok(step)
@@ -253,7 +279,29 @@ pub fn step_from_record_with(
     };
     let speed = record_speed(&cols.t, cols.speed.as_deref(), cols.position.as_deref());
     let channels = measured_channels(&cols, current_lsb);
+    // A step that comes back down is fitted whole, from rest at the first sample, as its
+    // levels; the rise alone serves the paper's method.
+    let whole = match loc.fall {
+        Some(_) => {
+            let (input, priors) = voltage_levels(&cols.t, &cols.voltage, voltage_lsb)
+                .map_err(|e| BadInput(format!("{shown}: {e}")))?;
+            Some(LoadedExcited {
+                path: shown.clone(),
+                label: shown.clone(),
+                input,
+                priors,
+                dt: loc.dt,
+                exclude_current: None,
+                exclude_speed: None,
+                record: cols.clone(),
+            })
+        }
+        None => None,
+    };
+    let rise = loc.fall.map_or(usize::MAX, |f| f - from);
     Ok(LoadedStep {
+        rise,
+        whole,
         channels,
         label: shown.clone(),
         path: shown,

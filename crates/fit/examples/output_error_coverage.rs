@@ -8,7 +8,8 @@
 //!
 //! Output error on a staircase (40, −20, 0, 2.5 V; or 40 V then back to 0 V on a unipolar
 //! voltage range with `--return-to-zero`), or with `--full` the step-pair full fit (40 V and
-//! 2.5 V). Prints how many intervals of each parameter contained the truth.
+//! 2.5 V; with `--return-to-zero` each back to 0 V after 50 s and recorded for 100 s, the rise
+//! and the fall fitted). Prints how many intervals of each parameter contained the truth.
 #[path = "../tests/reference/mod.rs"]
 mod reference;
 

@@ -132,6 +132,6 @@ pub use pipeline::{
     identify_step_pair, judge_clipping, parameter_estimates, steady_value, torque_constant,
     ClippingVerdict, PaperSkipped, ParameterEstimate, RecordChannel, StepMethod, StepPairError,
     StepPairIdentification, StepRecord, StepRoute, TorqueConstantError, TorqueConstantSource,
-    MAX_CLIPPED_FRACTION, MAX_CLIPPED_VOLTAGE, POORLY_DETERMINED, STEADY_TAIL_PARTS,
+    WholeRecord, MAX_CLIPPED_FRACTION, MAX_CLIPPED_VOLTAGE, POORLY_DETERMINED, STEADY_TAIL_PARTS,
 };
 pub use speed::{encoder_speed, record_speed, ENCODER_SPEED_BASE_S};

@@ -13,10 +13,10 @@ use motor_model::MotorParams;
 
 use crate::error::FitError;
 use crate::full_model::{identify_full_with_inputs, FullFit, StepTest, PARAM_NAMES, PARAM_UNITS};
-use crate::input_uncertainty::StepInputs;
+use crate::input_uncertainty::{LevelPrior, StepInputs};
 use crate::intervals::MotorIntervals;
 use crate::lm::LmSettings;
-use crate::output_error::{electrical_equation, ExcitedRecord};
+use crate::output_error::{electrical_equation, identify_output_error_with_inputs, ExcitedRecord};
 use crate::paper_method::{identify_paper, PaperIdentification};
 use crate::start::steady_state_start;
 
@@ -34,10 +34,26 @@ pub enum StepMethod {
 /// One step record as the pipeline reads it.
 #[derive(Debug, Clone, Copy)]
 pub struct StepRecord<'a> {
-    /// The record from the step on.
+    /// The record from the step on: up to the return ([`crate::StepLocation::fall`]) for a
+    /// step that comes back down (the paper's method and the steady states read the rise).
     pub test: StepTest<'a>,
     /// What the record leaves unknown about the step (height, instant, current LSB).
     pub inputs: StepInputs,
+    /// The whole record, for a step whose voltage comes back down (a return to 0 V): the full
+    /// method then models the fall too. `None` for a record that ends at its step's level.
+    pub whole: Option<WholeRecord<'a>>,
+}
+
+/// The whole record of a step that comes back down, as the output-error fit reads it: the
+/// voltage rebuilt as its levels (the step and the return, [`crate::voltage_levels`]) from the
+/// record's first sample, at rest there.
+#[derive(Debug, Clone, Copy)]
+pub struct WholeRecord<'a> {
+    /// The record from its first sample.
+    pub record: ExcitedRecord<'a>,
+    /// What the record leaves unknown about each level of `record.input` (level and start
+    /// instant, [`crate::voltage_levels`]).
+    pub priors: &'a [LevelPrior],
 }
 
 impl StepRecord<'_> {
@@ -215,7 +231,10 @@ impl StepPairIdentification {
 /// Identifies a step pair, the high-voltage step first: the paper's method (unless clipped
 /// samples rule it out), then with [`StepMethod::Full`] the full model (fitting the step
 /// heights and instants as uncertain inputs, [`identify_full_with_inputs`]) started from it, or
-/// from the steady states ([`steady_state_start`]) where it does not apply.
+/// from the steady states ([`steady_state_start`]) where it does not apply. Records whose
+/// voltage comes back down ([`StepRecord::whole`]) are fitted whole, rise and fall, by output
+/// error from rest ([`identify_output_error_with_inputs`], the levels and their instants as
+/// uncertain inputs); a pair with one such record and one without is refused.
 pub fn identify_step_pair(
     high: &StepRecord<'_>,
     low: &StepRecord<'_>,
@@ -244,12 +263,29 @@ pub fn identify_step_pair(
                     StepRoute::FullFromSteadyStates,
                 ),
             };
-            let full = identify_full_with_inputs(
-                &[high.test, low.test],
-                &[high.inputs, low.inputs],
-                &start,
-                settings,
-            )
+            let full = match (high.whole, low.whole) {
+                (None, None) => identify_full_with_inputs(
+                    &[high.test, low.test],
+                    &[high.inputs, low.inputs],
+                    &start,
+                    settings,
+                ),
+                // Rise and fall: the input is piecewise constant, each level (the return's
+                // included) and its instant an uncertain input as the step's are.
+                (Some(h), Some(l)) => identify_output_error_with_inputs(
+                    &[h.record, l.record],
+                    &[h.priors.to_vec(), l.priors.to_vec()],
+                    &start,
+                    settings,
+                ),
+                _ => Err(FitError::BadData {
+                    series: "step pair".into(),
+                    reason: "one record returns to 0 V after its step and the other does not: \
+                             the full method models both falls or neither — fit the two \
+                             records together with identify --record (output error)"
+                        .into(),
+                }),
+            }
             .map_err(StepPairError::Full)?;
             Ok(StepPairIdentification {
                 paper,
@@ -443,6 +479,7 @@ mod tests {
                 exclude_speed: None,
             },
             inputs: StepInputs::default(),
+            whole: None,
         }
     }
 
@@ -467,6 +504,91 @@ mod tests {
             assert!(((e.value - t) / t).abs() < 1e-6, "{e:?}");
             assert!(e.ci95.is_some() && !e.poorly_determined(), "{e:?}");
         }
+    }
+
+    /// A record of a step of `volts` at t = 0 back to 0 V in the middle of the period before
+    /// the sample at 50 s (where the fall's instant is expected), 100 s at [`RATE_HZ`], exact.
+    fn returning(motor: &MotorParams, volts: f64) -> motor_model::Trace {
+        let input = Input::piecewise(&[(0.0, volts), (50.0 - 0.5 / RATE_HZ, 0.0)]).unwrap();
+        motor_model::simulate(motor, motor_model::Effects::none(), &input, 100.0, RATE_HZ).unwrap()
+    }
+
+    #[test]
+    fn a_step_back_to_zero_is_fitted_whole_rise_and_fall() {
+        let truth = MotorParams::paper();
+        let traces = [returning(&truth, 40.0), returning(&truth, 2.5)];
+        let levels: Vec<_> = traces
+            .iter()
+            .map(|tr| crate::voltage_levels(&tr.t, &tr.voltage, None).unwrap())
+            .collect();
+        let mut records = Vec::new();
+        for (tr, (input, priors)) in traces.iter().zip(&levels) {
+            let loc = crate::locate_step(&tr.t, &tr.voltage).unwrap();
+            let fall = loc.fall.expect("the voltage comes back down");
+            assert_eq!((loc.index, fall), (0, (50.0 * RATE_HZ) as usize));
+            let rise = loc.index..fall;
+            records.push(StepRecord {
+                test: StepTest {
+                    volts: loc.volts,
+                    t_first: 0.0,
+                    dt: loc.dt,
+                    current: &tr.current[rise.clone()],
+                    speed: Some(&tr.speed[rise]),
+                    position: None,
+                    exclude_current: None,
+                    exclude_speed: None,
+                },
+                inputs: loc.inputs(),
+                whole: Some(WholeRecord {
+                    record: ExcitedRecord {
+                        input,
+                        dt: loc.dt,
+                        current: &tr.current,
+                        speed: Some(&tr.speed),
+                        position: None,
+                        exclude_current: None,
+                        exclude_speed: None,
+                    },
+                    priors,
+                }),
+            });
+        }
+        // The paper's method reads the rise: as on records that hold the step.
+        let (mut hv, mut lv) = (exact(&truth, 40.0), exact(&truth, 2.5));
+        for c in [&mut hv, &mut lv] {
+            c.current.truncate(records[0].test.current.len());
+            c.speed.truncate(records[0].test.current.len());
+        }
+        let (high, low) = (record(&hv, None), record(&lv, None));
+        let held = identify_step_pair(&high, &low, StepMethod::Paper, LmSettings::default())
+            .unwrap()
+            .paper
+            .unwrap();
+        let result = identify_step_pair(
+            &records[0],
+            &records[1],
+            StepMethod::Full,
+            LmSettings::default(),
+        )
+        .expect("the full fit runs");
+        assert_eq!(result.route, StepRoute::FullFromPaper);
+        let paper = result.paper.as_ref().unwrap();
+        for (a, b) in paper.params.values().iter().zip(held.params.values()) {
+            assert!(((a - b) / b).abs() < 1e-9, "{a} vs {b}");
+        }
+        let full = result.full.as_ref().unwrap();
+        assert!(full.accepted(), "{:?}", full.failure());
+        // Fitted whole: every sample of both records, the fall's included.
+        let fitted: usize = full.fitted.iter().map(|c| c.samples.len()).sum();
+        assert_eq!(fitted, 2 * 2 * traces[0].t.len());
+        for (e, t) in result.estimates().iter().zip(truth.values()) {
+            assert!(((e.value - t) / t).abs() < 1e-5, "{e:?} vs {t}");
+            assert!(e.ci95.is_some(), "{e:?}");
+        }
+        // One record back to 0 V and one held: refused, not half-modelled.
+        let err = identify_step_pair(&records[0], &low, StepMethod::Full, LmSettings::default())
+            .expect_err("a mixed pair");
+        assert!(err.to_string().contains("identify --record"), "{err}");
     }
 
     #[test]

@@ -21,6 +21,10 @@ pub struct StepLocation {
     pub dt: f64,
     /// Time of the step \[s\] (the first sample at the new level).
     pub t_step: f64,
+    /// Index of the first sample after the step's level, when the voltage comes back down
+    /// (below half the step) and stays there to the record's end — a return to 0 V; `None`
+    /// when the record ends at the step's level. The step is the samples `index..fall`.
+    pub fall: Option<usize>,
 }
 
 impl StepLocation {
@@ -52,7 +56,10 @@ impl StepLocation {
 
 /// Locates the voltage step: the first sample whose voltage passes half the median of the
 /// record's last half (pre-trigger samples at 0 V are allowed before it), and checks that the
-/// time column is strictly increasing and uniform. The voltage's ADC step is found from the
+/// time column is strictly increasing and uniform. A record that ends below half its step
+/// (the voltage returned to 0 V) is measured on its peak level instead (the median of the
+/// samples beyond half its largest |voltage|), and the return is located
+/// ([`StepLocation::fall`]); the step must hold in between. The voltage's ADC step is found from the
 /// column if it can be ([`VoltageScale::of`]); [`locate_step_with`] takes it from elsewhere.
 pub fn locate_step(t: &[f64], voltage: &[f64]) -> Result<StepLocation, FitError> {
     locate_step_with(t, voltage, None)
@@ -80,23 +87,43 @@ pub fn locate_step_with(
     }
     let mut tail: Vec<f64> = voltage[voltage.len() / 2..].to_vec();
     let mid = tail.len() / 2;
-    let level = *tail.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let end = *tail.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let level = if end.is_finite() && end.abs() >= 0.5 * peak_level(voltage).abs() {
+        end
+    } else {
+        // The record ends below half its step: the voltage came back down (a return to 0 V).
+        peak_level(voltage)
+    };
     if !(level.abs() > 0.0 && level.is_finite()) {
         return Err(bad(
             "voltage",
+            format!("the voltage settles at {end} V: no step found (is the voltage column right?)"),
+        ));
+    }
+    let high = |v: f64| v * level.signum() >= 0.5 * level.abs();
+    let index = voltage.iter().position(|&v| high(v)).unwrap_or(0);
+    let fall = voltage
+        .iter()
+        .rposition(|&v| high(v))
+        .map(|last| last + 1)
+        .filter(|&f| f < voltage.len());
+    let step_end = fall.unwrap_or(voltage.len());
+    // A step that comes back down is one step only if it holds in between.
+    let dip = fall.and_then(|_| voltage[index..step_end].iter().position(|&v| !high(v)));
+    if let Some(dip) = dip {
+        return Err(bad(
+            "voltage",
             format!(
-                "the voltage settles at {level} V: no step found (is the voltage column right?)"
+                "sample {} ({} V) falls below half the step of {level:.4} V between the step at sample {index} and the return at sample {step_end}: the voltage steps more than once — fit the record with identify --record (output error)",
+                index + dip,
+                voltage[index + dip]
             ),
         ));
     }
-    let index = voltage
-        .iter()
-        .position(|&v| v * level.signum() >= 0.5 * level.abs())
-        .unwrap_or(0);
     // The mean, not the median: noise dithers the ADC's quantisation, so the mean of many
     // samples is unbiased (up to the bias estimate_level accounts for) while the median
     // sticks to one code (half an LSB off at worst).
-    let after = &voltage[index..];
+    let after = &voltage[index..step_end];
     let scale = VoltageScale::of(voltage, quantum_v);
     let level = estimate_level(after, &scale).ok_or_else(|| {
         bad(
@@ -114,7 +141,38 @@ pub fn locate_step_with(
         volts_variance_v2: level.variance_v2,
         dt,
         t_step: t[index],
+        fall,
     })
+}
+
+/// Fraction of a record's samples above the quantile [`peak_level`] reads (isolated glitches
+/// beyond it are ignored).
+const PEAK_QUANTILE_TRIM: f64 = 0.005;
+
+/// The level of a step that may come back down before the record ends \[V\]: the median of the
+/// samples beyond half the record's largest |voltage| (its 99.5th percentile, so that a glitch
+/// does not count), signed; 0 for an all-zero (or non-finite) column.
+fn peak_level(voltage: &[f64]) -> f64 {
+    let mut magnitudes: Vec<f64> = voltage
+        .iter()
+        .filter(|v| v.is_finite())
+        .map(|v| v.abs())
+        .collect();
+    if magnitudes.is_empty() {
+        return 0.0;
+    }
+    let keep = magnitudes.len() - 1 - (magnitudes.len() as f64 * PEAK_QUANTILE_TRIM) as usize;
+    let peak = *magnitudes.select_nth_unstable_by(keep, f64::total_cmp).1;
+    let mut beyond: Vec<f64> = voltage
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite() && v.abs() >= 0.5 * peak && peak > 0.0)
+        .collect();
+    if beyond.is_empty() {
+        return 0.0;
+    }
+    let mid = beyond.len() / 2;
+    *beyond.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 /// The sample period \[s\] of `t`: strictly increasing, and uniform (to 0.1 %) from sample
@@ -139,4 +197,58 @@ pub(crate) fn uniform_period(t: &[f64], from: usize, purpose: &str) -> Result<f6
         }
     }
     Ok(dt)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid(n: usize) -> Vec<f64> {
+        (0..n).map(|i| i as f64 * 0.01).collect()
+    }
+
+    #[test]
+    fn a_held_step_has_no_fall() {
+        let v: Vec<f64> = (0..100).map(|i| if i < 10 { 0.0 } else { 40.0 }).collect();
+        let loc = locate_step(&grid(100), &v).unwrap();
+        assert_eq!((loc.index, loc.fall), (10, None));
+        assert_eq!(loc.volts, 40.0);
+    }
+
+    #[test]
+    fn a_return_to_zero_is_located_and_left_out_of_the_step_height() {
+        // 40 V from sample 10 to 39, then 0 V for 60 samples: the last half's median is 0.
+        let v: Vec<f64> = (0..100)
+            .map(|i| if (10..40).contains(&i) { -40.0 } else { 0.0 })
+            .collect();
+        let loc = locate_step(&grid(100), &v).unwrap();
+        assert_eq!((loc.index, loc.fall), (10, Some(40)));
+        assert_eq!(loc.volts, -40.0);
+    }
+
+    #[test]
+    fn a_step_that_drops_out_and_comes_back_is_refused() {
+        let v: Vec<f64> = (0..100)
+            .map(|i| {
+                if (10..40).contains(&i) && i != 25 {
+                    40.0
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let err = locate_step(&grid(100), &v).unwrap_err().to_string();
+        assert!(
+            err.contains("sample 25") && err.contains("identify --record"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn an_all_zero_record_has_no_step() {
+        let err = locate_step(&grid(100), &[0.0; 100])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("settles at 0 V: no step found"), "{err}");
+    }
 }

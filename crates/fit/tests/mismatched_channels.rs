@@ -100,7 +100,7 @@ proptest! {
                 prop_assert!(r.is_some());
             }
         }
-        let pair = StepRecord { test, inputs: StepInputs::default() };
+        let pair = StepRecord { test, inputs: StepInputs::default(), whole: None };
         for method in [StepMethod::Paper, StepMethod::Full] {
             let piped = identify_step_pair(&pair, &pair, method, settings);
             if used_misaligned {

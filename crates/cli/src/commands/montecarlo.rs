@@ -14,7 +14,7 @@ use serde_json::json;
 use crate::args::MontecarloArgs;
 use crate::progress::Jobs;
 use crate::settings::{self, Logger};
-use crate::simulated::record_at;
+use crate::simulated::{record_at, StepTiming};
 use crate::{BadInput, NotConverged};
 
 /// Most record pairs a study may ask for (200 take about 10 s on 2 cores; a million, a day).
@@ -44,6 +44,9 @@ struct Chain {
     motor_spread: f64,
     /// ADC ranges stretched at random (up to [`RANGE_STRETCH`]).
     vary_range: bool,
+    /// How long each step holds before the voltage returns to 0 V \[s\], if it does (the
+    /// record then runs as long again).
+    hold_s: Option<f64>,
 }
 
 /// The validated settings of a Monte Carlo study.
@@ -83,7 +86,11 @@ fn one_run(study: &Settings, i: usize) -> Result<Run> {
             0.0
         }
     };
-    let (at_high, at_low) = (at(), at());
+    let mut timing = || StepTiming {
+        at_s: at(),
+        fall_at_s: a.hold_s.map(|hold| hold + at()),
+    };
+    let (at_high, at_low) = (timing(), timing());
     let mut chain = || {
         let stretch = if a.vary_range {
             1.0 + RANGE_STRETCH * rng.uniform()
@@ -145,6 +152,23 @@ impl Settings {
         // refused with what to fix, not run into a table of NaN.
         let motor = settings::motor(&a.motor.motor)?;
         let logger = Logger::new(a.duration, a.rate, a.adc_bits, a.noise_lsb, a.encoder_cpr)?;
+        // A step that returns to 0 V holds for --duration, and the record runs as long again.
+        let hold_s = a.return_to_zero.then_some(logger.duration_s);
+        let record_logger = match hold_s {
+            Some(hold) => {
+                let (duration_s, _) = settings::record_grid(2.0 * hold, a.rate).map_err(|e| {
+                    BadInput(format!(
+                        "--return-to-zero records twice --duration {}: {e}",
+                        settings::shown(a.duration)
+                    ))
+                })?;
+                Logger {
+                    duration_s,
+                    ..logger
+                }
+            }
+            None => logger,
+        };
         Ok(Settings {
             high_voltage_v: settings::breakaway_step(
                 "--high-voltage",
@@ -159,7 +183,7 @@ impl Settings {
                 logger.duration_s,
             )?,
             motor,
-            logger,
+            logger: record_logger,
             chain: Chain {
                 voltage_noise_lsb: match a.voltage_noise_lsb {
                     Some(v) if !(v.is_finite() && v >= 0.0) => {
@@ -182,6 +206,7 @@ impl Settings {
                     .into());
                 },
                 vary_range: a.vary_range,
+                hold_s,
             },
             seed: a.seed,
             runs: a.runs,
@@ -266,8 +291,12 @@ pub fn run(study: &Settings) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&report)?);
         return failed_runs(&failures, study.runs);
     }
+    let hold = study
+        .chain
+        .hold_s
+        .map_or(String::new(), |h| format!(", back to 0 V after {h} s"));
     println!(
-        "Monte Carlo: {} record pairs ({} V and {} V steps, {} s at {} Hz; {}-bit ADC, {} LSB noise, encoder {} counts/rev, speed from the encoder)",
+        "Monte Carlo: {} record pairs ({} V and {} V steps{hold}, {} s at {} Hz; {}-bit ADC, {} LSB noise, encoder {} counts/rev, speed from the encoder)",
         runs.len(), study.high_voltage_v, study.low_voltage_v, study.logger.duration_s, study.logger.rate_hz, study.logger.adc_bits, study.logger.noise_lsb, study.logger.encoder_cpr
     );
     println!(

@@ -261,7 +261,8 @@ pub struct Config {
     pub noise_lsb: f64,
     /// Steps at a random instant within a sample period (else on a sample).
     pub subsample_step: bool,
-    /// The output-error record returns to 0 V (and rests there) on a unipolar voltage range.
+    /// The output-error record returns to 0 V (and rests there) on a unipolar voltage range;
+    /// each step record of a pair returns to 0 V after 50 s and is recorded for 100 s.
     pub return_to_zero: bool,
 }
 
@@ -303,29 +304,52 @@ fn covered(fit: &fit::FullFit, truth: &Motor, inside: &mut [usize; 6]) {
     }
 }
 
+/// The output-error fit's view of a whole logged record (current and encoder angle) driven by
+/// `input`, sampled every `dt` \[s\].
+fn excited<'a>(input: &'a motor_model::Input, dt: f64, rec: &'a Logged) -> fit::ExcitedRecord<'a> {
+    fit::ExcitedRecord {
+        input,
+        dt,
+        current: &rec.current,
+        speed: None,
+        position: Some(&rec.angle),
+        exclude_current: None,
+        exclude_speed: None,
+    }
+}
+
 /// Coverage of the full step-pair fit's 95 % intervals over `runs` record pairs (40 V and
-/// 2.5 V, 50 s at 1 kHz): how many runs each interval contained the truth, and the runs whose
-/// fit gave intervals.
+/// 2.5 V, 50 s at 1 kHz; with `return_to_zero` each back to 0 V after 50 s and recorded for
+/// 100 s, fitted whole): how many runs each interval contained the truth, and the runs whose
+/// fit gave intervals. The pipeline's own route ([`fit::identify_step_pair`]).
 pub fn step_pair_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], usize) {
-    use fit::{identify_full_with_inputs, identify_paper, locate_step_with, LmSettings, StepTest};
+    use fit::{
+        identify_step_pair, locate_step_with, voltage_levels, LmSettings, StepMethod, StepRecord,
+        StepTest, WholeRecord,
+    };
     let dt = 1e-3;
-    let n = 50_001;
+    let hold = 50_000;
+    let n = if cfg.return_to_zero { 2 * hold } else { hold } + 1;
     let mut inside = [0; 6];
     let mut with_ci = 0;
+    let t: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
     for run in 0..runs {
         let mut rng = Rng::new(seed.wrapping_mul(1_000_003).wrapping_add(run));
         let motor = run_motor(&mut rng);
         let mut logged = Vec::new();
         for volts in [40.0, 2.5] {
-            let at = if cfg.subsample_step {
-                rng.uniform() * dt
-            } else {
-                0.0
+            let mut shift = || {
+                if cfg.subsample_step {
+                    rng.uniform() * dt
+                } else {
+                    0.0
+                }
             };
-            let input = Staircase {
-                levels: vec![(at, volts)],
-            };
-            let truth = simulate(&motor, &input, dt, n);
+            let mut levels = vec![(shift(), volts)];
+            if cfg.return_to_zero {
+                levels.push((hold as f64 * dt + shift(), 0.0));
+            }
+            let truth = simulate(&motor, &Staircase { levels }, dt, n);
             let stretch = 1.0 + 0.05 * rng.uniform();
             let rec = log(
                 &truth,
@@ -337,53 +361,50 @@ pub fn step_pair_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], usi
             );
             logged.push(rec);
         }
-        let t: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
         let mut located = Vec::new();
         for rec in &logged {
             let loc = locate_step_with(&t, &rec.voltage, Some(rec.voltage_lsb)).expect("step");
             let mut inputs = loc.inputs();
             inputs.current_lsb_a = rec.current_lsb;
-            located.push((loc, inputs));
+            let levels = loc
+                .fall
+                .map(|_| voltage_levels(&t, &rec.voltage, Some(rec.voltage_lsb)).expect("levels"));
+            // The paper's method needs a speed: give it the encoder's central difference.
+            let rise = loc.index..loc.fall.unwrap_or(n);
+            let tt: Vec<f64> = (0..rise.len()).map(|i| i as f64 * dt).collect();
+            let speed = motor_model::central_difference(&tt, &rec.angle[rise.clone()]);
+            located.push((loc, inputs, levels, rise, speed));
         }
-        let tests: Vec<StepTest> = logged
+        let records: Vec<StepRecord> = logged
             .iter()
             .zip(&located)
-            .map(|(rec, (loc, _))| StepTest {
-                volts: loc.volts,
-                t_first: 0.0,
-                dt,
-                current: &rec.current[loc.index..],
-                speed: None,
-                position: Some(&rec.angle[loc.index..]),
-                exclude_current: None,
-                exclude_speed: None,
+            .map(|(rec, (loc, inputs, levels, rise, speed))| StepRecord {
+                test: StepTest {
+                    volts: loc.volts,
+                    t_first: 0.0,
+                    dt,
+                    current: &rec.current[rise.clone()],
+                    speed: Some(speed),
+                    position: Some(&rec.angle[rise.clone()]),
+                    exclude_current: None,
+                    exclude_speed: None,
+                },
+                inputs: *inputs,
+                whole: levels.as_ref().map(|(input, priors)| WholeRecord {
+                    record: excited(input, dt, rec),
+                    priors,
+                }),
             })
             .collect();
-        let inputs: Vec<_> = located.iter().map(|(_, u)| *u).collect();
-        // The paper's method needs a speed: give it the encoder's central difference.
-        let speeds: Vec<Vec<f64>> = tests
-            .iter()
-            .map(|s| {
-                let p = s.position.unwrap_or(&[]);
-                let tt: Vec<f64> = (0..p.len()).map(|i| i as f64 * dt).collect();
-                motor_model::central_difference(&tt, p)
-            })
-            .collect();
-        let with_speed: Vec<StepTest> = tests
-            .iter()
-            .zip(&speeds)
-            .map(|(s, w)| StepTest {
-                speed: Some(w),
-                position: None,
-                ..*s
-            })
-            .collect();
-        let start = identify_paper(&with_speed[0], &with_speed[1], LmSettings::default())
-            .map(|p| p.params)
-            .or_else(|_| fit::steady_state_start(&with_speed[0], &with_speed[1]))
-            .expect("start");
-        let fit = identify_full_with_inputs(&tests, &inputs, &start, LmSettings::default())
-            .expect("full fit");
+        let fit = identify_step_pair(
+            &records[0],
+            &records[1],
+            StepMethod::Full,
+            LmSettings::default(),
+        )
+        .expect("full fit")
+        .full
+        .expect("a full fit");
         if fit.ci95.is_some() {
             with_ci += 1;
         }
@@ -396,8 +417,7 @@ pub fn step_pair_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], usi
 /// −20 V, 0 V, 2.5 V over 140 s; or 40 V then 0 V over 150 s with `return_to_zero`).
 pub fn output_error_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], usize) {
     use fit::{
-        equation_error_start, identify_output_error_with_inputs, voltage_levels, ExcitedRecord,
-        LmSettings,
+        equation_error_start, identify_output_error_with_inputs, voltage_levels, LmSettings,
     };
     let dt = 1e-3;
     let mut inside = [0; 6];
@@ -438,15 +458,7 @@ pub fn output_error_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], 
         );
         let t: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
         let (u, priors) = voltage_levels(&t, &rec.voltage, Some(rec.voltage_lsb)).expect("levels");
-        let records = [ExcitedRecord {
-            input: &u,
-            dt,
-            current: &rec.current,
-            speed: None,
-            position: Some(&rec.angle),
-            exclude_current: None,
-            exclude_speed: None,
-        }];
+        let records = [excited(&u, dt, &rec)];
         let start = equation_error_start(&records).expect("start");
         let fit =
             identify_output_error_with_inputs(&records, &[priors], &start, LmSettings::default())
