@@ -183,6 +183,63 @@ pub fn quantisation_bias_variance(sigma: f64, q: f64) -> f64 {
     total
 }
 
+/// Largest noise, as a fraction of one ADC step, below which a channel is taken as
+/// noise-free: its bias variance ([`quantisation_bias_variance`]) is then above 86 % of
+/// `Δ²/12`, the quantiser's error a function of where its grid sits and not of the noise.
+const NOISE_FREE_FRACTION: f64 = 0.1;
+/// Grid phases over one step at which [`grid_phase_score_covariance`] quantises the model.
+const GRID_PHASES: usize = 64;
+
+/// The ADC step of a channel whose readings `values` are quantised without noise: the
+/// quantum of [`VoltageScale::of`]'s test, when the noise behind the readings (their
+/// second differences, [`crate::noise_std`], less the quantiser's own `Δ²/12`) is below
+/// a tenth of it. `None` for an unquantised or a noisy channel.
+pub(crate) fn noise_free_quantum(values: &[f64]) -> Option<f64> {
+    let q = detect_quantum(values)?;
+    let s = crate::full_model::noise_std(values);
+    let sigma = (s * s - q * q / 12.0).max(0.0).sqrt();
+    (sigma <= NOISE_FREE_FRACTION * q).then_some(q)
+}
+
+/// Covariance of the score `Jᵀr` that the quantisation of one noise-free channel puts there,
+/// over the unknown place of its grid: `E_φ[g(φ) g(φ)ᵀ]`, `g(φ) = −Jᵀ e(φ)/σ`, where
+/// `e_i(φ) = Q_φ(m_i) − m_i` is the error of a quantiser of step `q` whose codes sit at
+/// `φ + kq` on the model's values `m` (unit of the channel), `jac` the rows of the weighted
+/// residuals `(m − y)/σ` of the channel, and φ taken at [`GRID_PHASES`] places evenly over
+/// one step.
+///
+/// Without noise a quantiser's error is no noise: it is fixed by the signal and where the
+/// grid sits, held for as long as a code lasts (seconds on a settling tail), one-signed over
+/// a decelerating tail (the signal lingers near each code's far edge), and largely absorbed by
+/// the parameters on a settled level (the fit moves Ts to its held code). Residuals show only
+/// what the fit leaves of it; the grid's place, unknown and uniform over a step, is what
+/// varies from one record to the next, and its mean square (bias included) is what an
+/// interval must hold.
+pub(crate) fn grid_phase_score_covariance(
+    model: &[f64],
+    q: f64,
+    jac: nalgebra::DMatrixView<'_, f64>,
+    sigma: f64,
+) -> DMatrix<f64> {
+    let p = jac.ncols();
+    let mut total = DMatrix::zeros(p, p);
+    if !(q > 0.0 && sigma > 0.0) || model.len() != jac.nrows() {
+        return total;
+    }
+    for k in 0..GRID_PHASES {
+        let phase = (k as f64 + 0.5) / GRID_PHASES as f64 * q;
+        let e = DVector::from_iterator(
+            model.len(),
+            model
+                .iter()
+                .map(|&m| phase + q * ((m - phase) / q).round() - m),
+        );
+        let g = jac.tr_mul(&e) / sigma;
+        total += &g * g.transpose();
+    }
+    total / GRID_PHASES as f64
+}
+
 /// Standard normal distribution function.
 pub(crate) fn phi(x: f64) -> f64 {
     0.5 * libm::erfc(-x / std::f64::consts::SQRT_2)
@@ -588,6 +645,42 @@ mod tests {
             let ratio = wide[(k, k)] / narrow[(k, k)];
             assert!(ratio > 1.0 && ratio < 4.0, "parameter {k}: ratio {ratio}");
         }
+    }
+
+    #[test]
+    fn noise_free_quantum_is_found_only_without_noise() {
+        let q = 0.1;
+        let slow: Vec<f64> = (0..4000)
+            .map(|i| quantise(3.0 + 2.0 * (-(i as f64) / 800.0).exp(), q, 0.0))
+            .collect();
+        assert!((noise_free_quantum(&slow).unwrap() - q).abs() < 1e-12);
+        let mut rng = motor_model::NoiseRng::new(11);
+        let noisy: Vec<f64> = slow
+            .iter()
+            .map(|y| quantise(y + 0.5 * q * rng.normal(), q, 0.0))
+            .collect();
+        assert!(noise_free_quantum(&noisy).is_none());
+        let smooth: Vec<f64> = (0..4000).map(|i| (i as f64 * 1e-3).sin()).collect();
+        assert!(noise_free_quantum(&smooth).is_none());
+    }
+
+    #[test]
+    fn grid_phase_covariance_of_a_held_level_is_q2_over_12() {
+        // A constant signal read by one offset column: its error is uniform over ±q/2 as the
+        // grid moves, so the score's variance is (n/σ)² q²/12.
+        let (n, q, sigma) = (50, 0.2, 0.5);
+        let jac = DMatrix::from_element(n, 1, 1.0);
+        let c = grid_phase_score_covariance(&vec![1.234; n], q, jac.columns(0, 1), sigma);
+        let want = (n as f64 / sigma).powi(2) * q * q / 12.0;
+        assert!(
+            (c[(0, 0)] - want).abs() < 1e-3 * want,
+            "{} vs {want}",
+            c[(0, 0)]
+        );
+        // A ramp over many steps averages its errors out: far less than held.
+        let ramp: Vec<f64> = (0..n).map(|i| i as f64 * 0.37 * q).collect();
+        let moving = grid_phase_score_covariance(&ramp, q, jac.columns(0, 1), sigma);
+        assert!(moving[(0, 0)] < 0.1 * want, "{}", moving[(0, 0)]);
     }
 
     #[test]

@@ -28,8 +28,8 @@ use crate::full_model::{
 };
 use crate::initial_state::{FittedInitialState, InitialState};
 use crate::input_uncertainty::{
-    estimate_level, fit_with_inputs, LevelEstimate, LevelPrior, Nuisance, NuisanceProblem,
-    VoltageScale,
+    estimate_level, fit_with_inputs, grid_phase_score_covariance, noise_free_quantum,
+    LevelEstimate, LevelPrior, Nuisance, NuisanceProblem, VoltageScale,
 };
 use crate::lm::{half_squared_norm, LeastSquares, LmSettings, NormalEquations};
 use crate::mechanical::{
@@ -197,6 +197,10 @@ struct OeChannel {
     /// Measured values at `keep`.
     data: Vec<f64>,
     sigma: f64,
+    /// One ADC step \[unit\] of a channel read without noise
+    /// ([`crate::input_uncertainty::noise_free_quantum`]); `None` for a noisy or unquantised
+    /// channel and for an encoder's speed (its errors are the encoder's, not an ADC's).
+    noise_free_quantum: Option<f64>,
 }
 
 struct OeRecord {
@@ -767,9 +771,14 @@ fn prepare(k: usize, rec: &ExcitedRecord<'_>) -> Result<OeRecord, FitError> {
     let channel = |kind: Channel, full: Vec<f64>, mask: Option<&[bool]>| {
         let keep: Vec<usize> = (0..n).filter(|&i| !mask.is_some_and(|m| m[i])).collect();
         let data: Vec<f64> = keep.iter().map(|&i| full[i]).collect();
+        let noise_free_quantum = match kind {
+            Channel::EncoderSpeed => None,
+            Channel::Current | Channel::Speed => noise_free_quantum(&data),
+        };
         OeChannel {
             kind,
             sigma: noise_std(&data),
+            noise_free_quantum,
             keep,
             data,
         }
@@ -1048,13 +1057,36 @@ impl NuisanceProblem for OeProblem {
         self.residuals(theta)
     }
 
+    /// The score covariance of the residuals' errors: Newey–West over runs of equal readings
+    /// ([`newey_west_run_covariance`]: readings that repeat exactly share one quantisation
+    /// error), except for a channel read without noise: there the error of every reading is
+    /// fixed by the signal and by where the ADC's grid sits, and the fit absorbs much of it
+    /// (a settled level's held code into Ts), so the residuals cannot show it; that channel
+    /// enters instead as its quantiser on the model's values averaged over the grid's place
+    /// ([`crate::input_uncertainty::grid_phase_score_covariance`]).
     fn score_covariance_of(&self, r: &[f64], jac: &DMatrix<f64>) -> Option<DMatrix<f64>> {
         let channels = || self.records.iter().flat_map(|rec| &rec.channels);
         let series: Vec<usize> = channels().map(|ch| ch.data.len()).collect();
-        // Readings that repeat exactly share one quantisation error: see
-        // [`newey_west_run_covariance`].
         let runs: Vec<usize> = channels().flat_map(|ch| equal_runs(&ch.data)).collect();
-        newey_west_run_covariance(r, jac, &series, &runs)
+        let mut rest = r.to_vec();
+        let mut grid = DMatrix::zeros(jac.ncols(), jac.ncols());
+        let mut row = 0;
+        for ch in channels() {
+            let len = ch.data.len();
+            if let Some(q) = ch.noise_free_quantum {
+                let rows = rest.get_mut(row..row + len)?;
+                let model: Vec<f64> = ch
+                    .data
+                    .iter()
+                    .zip(rows.iter())
+                    .map(|(y, r)| y + ch.sigma * r)
+                    .collect();
+                rows.fill(0.0);
+                grid += grid_phase_score_covariance(&model, q, jac.rows(row, len), ch.sigma);
+            }
+            row += len;
+        }
+        newey_west_run_covariance(&rest, jac, &series, &runs).map(|c| c + grid)
     }
 }
 
