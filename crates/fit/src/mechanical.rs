@@ -209,7 +209,8 @@ fn record_rows(
         return Err(bad(
             "record",
             format!(
-                "{n} samples: at least {min} are needed with decimation {}",
+                "{n} samples: at least {min} are needed, the speed and acceleration being read \
+                 every {} samples (record for longer, or at a higher rate)",
                 settings.decimation
             ),
         ));
