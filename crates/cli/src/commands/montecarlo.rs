@@ -295,8 +295,12 @@ pub fn run(study: &Settings) -> Result<()> {
         .chain
         .hold_s
         .map_or(String::new(), |h| format!(", back to 0 V after {h} s"));
+    let voltage_noise = study
+        .chain
+        .voltage_noise_lsb
+        .map_or(String::new(), |v| format!(" ({v} LSB on the voltage)"));
     println!(
-        "Monte Carlo: {} record pairs ({} V and {} V steps{hold}, {} s at {} Hz; {}-bit ADC, {} LSB noise, encoder {} counts/rev, speed from the encoder)",
+        "Monte Carlo: {} record pairs ({} V and {} V steps{hold}, {} s at {} Hz; {}-bit ADC, {} LSB noise{voltage_noise}, encoder {} counts/rev, speed from the encoder)",
         runs.len(), study.high_voltage_v, study.low_voltage_v, study.logger.duration_s, study.logger.rate_hz, study.logger.adc_bits, study.logger.noise_lsb, study.logger.encoder_cpr
     );
     println!(
