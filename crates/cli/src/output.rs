@@ -397,17 +397,18 @@ fn remove_on_signals() -> Result<()> {
 mod tests {
     use super::*;
 
-    fn scratch(name: &str) -> PathBuf {
-        let dir =
-            std::env::temp_dir().join(format!("motorid-output-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
+    /// A new, empty directory removed with its contents when the test ends.
+    fn scratch(name: &str) -> tempfile::TempDir {
+        tempfile::Builder::new()
+            .prefix(&format!("motorid-output-{name}-"))
+            .tempdir()
+            .unwrap()
     }
 
     #[test]
     fn links_are_followed_to_their_final_target() {
-        let dir = scratch("links");
+        let tmp = scratch("links");
+        let dir = tmp.path();
         let file = dir.join("real.csv");
         std::fs::write(&file, "old").unwrap();
         #[cfg(unix)]
@@ -433,7 +434,7 @@ mod tests {
         }
         assert_eq!(resolve(Path::new("-")), Ok(Target::Stdout));
         assert_eq!(resolve(&file), Ok(Target::Replace(file.clone())));
-        let err = resolve(&dir).unwrap_err();
+        let err = resolve(dir).unwrap_err();
         assert!(err.contains("is a directory"), "{err}");
         let err = resolve(&dir.join("no/such.csv")).unwrap_err();
         assert!(err.contains("does not exist"), "{err}");
@@ -443,10 +444,11 @@ mod tests {
 
     #[test]
     fn folders_must_exist_as_folders_or_be_creatable() {
-        let dir = scratch("folders");
+        let tmp = scratch("folders");
+        let dir = tmp.path();
         let file = dir.join("file");
         std::fs::write(&file, "x").unwrap();
-        assert_eq!(creatable_dir(&dir), Ok(()));
+        assert_eq!(creatable_dir(dir), Ok(()));
         assert_eq!(creatable_dir(&dir.join("a/b/c")), Ok(()));
         assert!(creatable_dir(&file)
             .unwrap_err()
@@ -458,7 +460,8 @@ mod tests {
 
     #[test]
     fn a_failed_write_leaves_the_old_file_and_no_temporary_file() {
-        let dir = scratch("failed");
+        let tmp = scratch("failed");
+        let dir = tmp.path();
         let file = dir.join("rec.csv");
         std::fs::write(&file, "old").unwrap();
         let err = write_with(&file, |out| {
@@ -468,10 +471,10 @@ mod tests {
         .unwrap_err();
         assert!(format!("{err:#}").contains("cannot write"), "{err:#}");
         assert_eq!(std::fs::read_to_string(&file).unwrap(), "old");
-        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
-        assert!(!pending().iter().any(|p| p.starts_with(&dir)));
+        assert_eq!(std::fs::read_dir(dir).unwrap().count(), 1);
+        assert!(!pending().iter().any(|p| p.starts_with(dir)));
         write(&file, b"new").unwrap();
         assert_eq!(std::fs::read_to_string(&file).unwrap(), "new");
-        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+        assert_eq!(std::fs::read_dir(dir).unwrap().count(), 1);
     }
 }

@@ -16,14 +16,6 @@ use std::time::{Duration, Instant};
 
 use common::{assert_bad_input, motorid, scratch, stderr, stdout};
 
-/// `scratch(name)`, emptied first.
-fn fresh(name: &str) -> PathBuf {
-    let dir = scratch(name);
-    std::fs::remove_dir_all(&dir).unwrap();
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
 /// `simulate` of a 1 V step for `duration` seconds at 1 kHz to `path`.
 fn simulate_to(path: &Path, duration: &str) -> Output {
     motorid(&[
@@ -65,7 +57,7 @@ fn c_path(path: &Path) -> CString {
 
 #[test]
 fn a_symlink_is_followed_and_stays_a_link() {
-    let dir = fresh("out-symlink");
+    let dir = scratch("out-symlink");
     std::fs::write(dir.join("real.csv"), "old\n").unwrap();
     std::os::unix::fs::symlink("real.csv", dir.join("link")).unwrap();
     let out = simulate_to(&dir.join("link"), "0.01");
@@ -98,7 +90,7 @@ fn a_symlink_is_followed_and_stays_a_link() {
 
 #[test]
 fn a_fifo_is_streamed_to_its_reader() {
-    let dir = fresh("out-fifo");
+    let dir = scratch("out-fifo");
     let fifo = dir.join("fifo");
     // SAFETY: a valid NUL-terminated path.
     assert_eq!(unsafe { libc::mkfifo(c_path(&fifo).as_ptr(), 0o644) }, 0);
@@ -128,7 +120,7 @@ fn a_fifo_is_streamed_to_its_reader() {
 
 #[test]
 fn a_device_node_is_written_in_place() {
-    let dir = fresh("out-device");
+    let dir = scratch("out-device");
     let node = dir.join("null");
     let dev = libc::makedev(1, 3);
     // SAFETY: a valid NUL-terminated path.
@@ -169,7 +161,7 @@ fn full_device(dir: &Path) -> PathBuf {
 
 #[test]
 fn dev_full_reports_the_full_disk_and_stays_a_device() {
-    let dir = fresh("out-full");
+    let dir = scratch("out-full");
     let full = full_device(&dir);
     let before = std::fs::metadata(&full).unwrap();
     assert!(before.file_type().is_char_device());
@@ -208,7 +200,8 @@ impl Drop for Mounted {
 
 #[test]
 fn a_full_file_system_leaves_the_old_file_and_no_temporary_file() {
-    let dir = fresh("out-fullfs").join("small");
+    let root = scratch("out-fullfs");
+    let dir = root.join("small");
     std::fs::create_dir_all(&dir).unwrap();
     let (source, fstype, options) = (c"tmpfs", c"tmpfs", c"size=64k");
     // SAFETY: valid NUL-terminated strings; `data` is the option string tmpfs expects.
@@ -244,7 +237,7 @@ fn a_full_file_system_leaves_the_old_file_and_no_temporary_file() {
 
 #[test]
 fn a_signal_during_a_long_write_leaves_the_old_file_and_no_temporary_file() {
-    let dir = fresh("out-signal");
+    let dir = scratch("out-signal");
     let target = dir.join("rec.csv");
     for (signal, code) in [(libc::SIGTERM, 143), (libc::SIGINT, 130)] {
         std::fs::write(&target, "old\n").unwrap();
@@ -282,7 +275,7 @@ fn a_signal_during_a_long_write_leaves_the_old_file_and_no_temporary_file() {
 
 #[test]
 fn bad_output_paths_are_refused_before_any_work() {
-    let dir = fresh("out-refused");
+    let dir = scratch("out-refused");
     let file = dir.join("file");
     std::fs::write(&file, "not a folder\n").unwrap();
     let (d, f) = (dir.to_str().unwrap(), file.to_str().unwrap());

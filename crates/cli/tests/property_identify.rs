@@ -484,7 +484,7 @@ fn identify_is_right_within_its_intervals_or_refuses() {
         None => (0..env_u64("MOTORID_CASES").unwrap_or(if heavy { HEAVY_CASES } else { CI_CASES }))
             .collect(),
     };
-    let root = scratch("property");
+    let mut root = scratch("property");
     let started = std::time::Instant::now();
     let mut failures = Vec::new();
     let mut exits = std::collections::BTreeMap::<String, usize>::new();
@@ -537,6 +537,9 @@ fn identify_is_right_within_its_intervals_or_refuses() {
     }
     if accepted < MIN_ACCEPTED {
         eprintln!("coverage not judged: fewer than {MIN_ACCEPTED} accepted cases");
+    }
+    if !failures.is_empty() {
+        root.keep();
     }
     assert!(
         failures.is_empty() && coverage_failures.is_empty(),

@@ -243,7 +243,8 @@ fn a_return_to_zero_volts_on_a_unipolar_adc_is_read_at_its_rail() {
 /// (R 5.6, k 0.017, refused); one inverse model over both records starts it right.
 #[test]
 fn small_servo_steps_by_output_error_start_from_the_pooled_torque_equation() {
-    let paths = small_servo_steps(&scratch("wrong_servo_oe"), None);
+    let dir = scratch("wrong_servo_oe");
+    let paths = small_servo_steps(&dir, None);
     let out = motorid(&[
         "identify", "--record", &paths[0], "--record", &paths[1], "--json",
     ]);

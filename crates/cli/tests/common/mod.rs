@@ -1,7 +1,7 @@
 //! Helpers shared by the end-to-end tests: run the real `motorid` binary.
 #![allow(dead_code)]
 
-use std::path::PathBuf;
+use std::path::Path;
 use std::process::{Command, Output};
 
 pub fn motorid(args: &[&str]) -> Output {
@@ -78,10 +78,42 @@ pub fn assert_bad_input(args: &[&str], needle: &str) {
     );
 }
 
-pub fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("motorid-cli-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// A test's own scratch directory, removed with everything in it when dropped (after a passing
+/// test and after a failed assertion alike). `MOTORID_KEEP_SCRATCH=1` keeps it to look at.
+pub struct Scratch(tempfile::TempDir);
+
+impl Scratch {
+    /// Keeps the directory and its files after the test, e.g. those of a failing case.
+    pub fn keep(&mut self) {
+        self.0.disable_cleanup(true);
+    }
+}
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        self.0.path()
+    }
+}
+
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        self.0.path()
+    }
+}
+
+/// A new, empty scratch directory named after `name` under the system's temporary directory.
+pub fn scratch(name: &str) -> Scratch {
+    let keep = std::env::var("MOTORID_KEEP_SCRATCH").is_ok_and(|v| v == "1");
+    let dir = tempfile::Builder::new()
+        .prefix(&format!("motorid-cli-{name}-"))
+        .disable_cleanup(keep)
+        .tempdir()
+        .expect("a scratch directory can be made");
+    if keep {
+        eprintln!("scratch directory kept: {}", dir.path().display());
+    }
+    Scratch(dir)
 }
 
 /// The paper's motor (Sec. 4.1) by parameter name: R, L, k, f, J, Ts (SI units).
