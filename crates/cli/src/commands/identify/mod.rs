@@ -301,9 +301,11 @@ pub fn report_json(
 }
 
 /// The table of `identify`: parameters with intervals, derived constants, fit quality, and
-/// `note` (why the full fit did not start from the paper's method) if any.
+/// `note` (why the full fit did not start from the paper's method) if any; `whole` where the
+/// step records return to 0 V and the full fit took them whole.
 fn print_table(
     method: &str,
+    whole: bool,
     paper: Result<&PaperIdentification, &str>,
     full: Option<&FullFit>,
     files: &[&str],
@@ -315,6 +317,7 @@ fn print_table(
         (None, Err(_)) => return,
     };
     match method {
+        "full" if whole => println!("full model: R, L, k, f, J, Ts fitted jointly to both whole records, rise and return to 0 V (output error, the levels and their instants as uncertain inputs)"),
         "full" => println!("full model: R, L, k, f, J, Ts fitted jointly to both records (exact response, breakaway included)"),
         "paper" => println!("paper method: fit of Eq. (33), then Eqs. (34)-(51) (the method gives no confidence intervals)"),
         _ => println!("output error: R, L, k, f, J, Ts fitted by simulating each record's own voltage (stick-slip model, Appendix D)"),
@@ -750,7 +753,8 @@ pub fn run(a: &Settings) -> Result<()> {
     } else {
         println!("{}", kinds::kind_line(&kind));
         let note = result.note().map(ToString::to_string);
-        print_table(method, paper, full, &files, note.as_deref());
+        let whole = hv.whole.is_some() && lv.whole.is_some();
+        print_table(method, whole, paper, full, &files, note.as_deref());
     }
     if let (Some(dir), Some(f)) = (&a.plot, full) {
         let records = [&hv, &lv].map(|s| FigureRecord {
@@ -907,7 +911,7 @@ fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Resu
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         println!("{}", kinds::kind_line(&kind));
-        print_table("output_error", Err(""), Some(&full), &files, None);
+        print_table("output_error", false, Err(""), Some(&full), &files, None);
         for (file, chosen, fitted) in &initial {
             let at = fitted.map_or(String::new(), |f| {
                 format!(
