@@ -117,17 +117,19 @@ fn assert_voltage_speed_truth(what: &str, files: &[&std::path::Path]) {
     }
 }
 
-/// `input` (simulate's options) on the servo through the logger, written into `dir` as
-/// `name.csv` without its current (and, with a tachometer, without the exact angle the
-/// simulator writes beside it: not a measurement here).
-fn servo_record(
+/// `input` (simulate's options) on `motor` (a motor file) through the logger, written into
+/// `dir` as `name.csv` without its current (and, with a tachometer, without the exact angle the
+/// simulator writes beside it: not a measurement here), from `from_s` \[s\] on.
+fn record_without_current(
     dir: &std::path::Path,
     name: &str,
+    motor: &str,
     input: &[&str],
     tacho: bool,
+    from_s: f64,
 ) -> std::path::PathBuf {
     let full = dir.join(format!("{name}_{tacho}_full.csv"));
-    let mut args = vec!["--motor", SERVO, "--quiet"];
+    let mut args = vec!["--motor", motor, "--quiet"];
     args.extend(input);
     args.extend(logger(tacho));
     simulate_to(&full, &args);
@@ -137,8 +139,18 @@ fn servo_record(
     } else {
         &["current"]
     };
-    without(&full, &path, drop, 0.0);
+    without(&full, &path, drop, from_s);
     path
+}
+
+/// [`record_without_current`] of the servo from its first sample.
+fn servo_record(
+    dir: &std::path::Path,
+    name: &str,
+    input: &[&str],
+    tacho: bool,
+) -> std::path::PathBuf {
+    record_without_current(dir, name, SERVO, input, tacho, 0.0)
 }
 
 /// A staircase from rest (2, 6, 3, 9 V), 0.7 s at 2 kHz.
@@ -209,22 +221,15 @@ fn a_step_from_one_level_to_another_of_a_running_motor_gives_the_constants() {
     // 5 V from t = 0, 15 V from 0.25 s; the record cut at 0.2 s, where the motor runs steadily
     // at 5 V: it starts running.
     let dir = scratch("kinds_level_to_level");
-    let full = dir.join("levels_full.csv");
-    let mut args = vec![
-        "--motor",
-        SERVO,
+    let input = [
         "--levels",
         "0:5,0.25:15",
         "--duration",
         "0.5",
         "--rate",
         "4000",
-        "--quiet",
     ];
-    args.extend(logger(false));
-    simulate_to(&full, &args);
-    let path = dir.join("levels.csv");
-    without(&full, &path, &["current"], 0.2);
+    let path = record_without_current(&dir, "levels", SERVO, &input, false, 0.2);
     assert_voltage_speed_truth("5 V → 15 V, running at the first sample", &[&path]);
     let report = identify(&[&path], &[]);
     let w0 = report["initial_speed"][0]["value"].as_f64().unwrap();
@@ -500,18 +505,8 @@ fn every_fixture_motor_without_current_gives_its_constants() {
         let physical = [("J", j), ("f", f), ("Ts", ts)];
         for tacho in [false, true] {
             let sensor = if tacho { "tachometer" } else { "encoder" };
-            let full = dir.join(format!("{}_{}_{tacho}_full.csv", case.motor, intervals));
-            let mut args = vec!["--motor", motor.as_str(), "--quiet"];
-            args.extend(case.input);
-            args.extend(logger(tacho));
-            simulate_to(&full, &args);
-            let path = dir.join(format!("{}_{}_{tacho}.csv", case.motor, intervals));
-            let drop: &[&str] = if tacho {
-                &["current", "position"]
-            } else {
-                &["current"]
-            };
-            without(&full, &path, drop, case.cut_s);
+            let name = format!("{}_{intervals}", case.motor);
+            let path = record_without_current(&dir, &name, &motor, case.input, tacho, case.cut_s);
             let plain = identify(&[&path], &[]);
             let given = identify(
                 &[&path],
@@ -563,23 +558,10 @@ fn the_underdamped_motor_running_at_the_first_sample_gives_its_constants() {
     let (r, l, k, f, j, ts) = (1.0, 0.1, 0.5, 0.01, 0.01, 0.01);
     for (low, high) in [("1", "3"), ("4", "12")] {
         let dir = scratch(&format!("kinds_underdamped_running_{low}"));
-        let full = dir.join("full.csv");
         let levels = format!("0:{low},2:{high}");
-        let mut args = vec![
-            "--motor",
-            "../../fixtures/motors/underdamped.json",
-            "--levels",
-            &levels,
-            "--duration",
-            "3",
-            "--rate",
-            "1000",
-            "--quiet",
-        ];
-        args.extend(logger(true));
-        simulate_to(&full, &args);
-        let path = dir.join("running.csv");
-        without(&full, &path, &["current", "position"], 1.8);
+        let input = ["--levels", &levels, "--duration", "3", "--rate", "1000"];
+        let motor = "../../fixtures/motors/underdamped.json";
+        let path = record_without_current(&dir, "running", motor, &input, true, 1.8);
         let plain = identify(&[&path], &[]);
         let (lo, hi) = interval(&plain, "kA");
         assert!(lo == 0.0 && hi >= r * j / k, "{low} V: kA [{lo}, {hi}]");
