@@ -14,7 +14,8 @@ use nalgebra::{DMatrix, DVector};
 use crate::error::FitError;
 use crate::initial_state::FittedInitialState;
 use crate::input_uncertainty::{
-    fit_with_inputs, settled_current, Nuisance, NuisanceProblem, StepInputs,
+    fit_with_inputs, grid_phase_score_covariance, noise_free_quantum, settled_current, Nuisance,
+    NuisanceProblem, StepInputs,
 };
 use crate::lm::{solve, LeastSquares, LmSettings, NormalEquations, Termination};
 use crate::parameters::{names_of, units_of, EffectEstimate, Parameters, MOTOR};
@@ -220,6 +221,10 @@ struct ChannelData {
     sigma: f64,
     /// Samples left out of the fit (`true`), if any.
     exclude: Option<Vec<bool>>,
+    /// The ADC step of a current or tachometer channel read without noise
+    /// ([`crate::input_uncertainty::noise_free_quantum`]); `None` for a noisy or unquantised
+    /// channel and for the encoder's speed.
+    noise_free_quantum: Option<f64>,
 }
 
 impl ChannelData {
@@ -236,12 +241,18 @@ impl ChannelData {
                 .collect(),
             None => Vec::new(),
         };
-        let sigma = noise_std(if exclude.is_some() { &kept } else { &data });
+        let fitted = if exclude.is_some() { &kept } else { &data };
+        let sigma = noise_std(fitted);
+        let noise_free_quantum = match kind {
+            Channel::Current | Channel::Speed => noise_free_quantum(fitted),
+            Channel::EncoderSpeed => None,
+        };
         ChannelData {
             kind,
             data,
             sigma,
             exclude,
+            noise_free_quantum,
         }
     }
 
@@ -503,22 +514,41 @@ impl NuisanceProblem for FullProblem {
         r.iter().all(|v| v.is_finite()).then_some(r)
     }
 
+    /// The score covariance of the residuals `r` with Jacobian columns `jac` (θ and inputs
+    /// alike): Newey–West within each channel of each test, except for a channel read without
+    /// noise ([`ChannelData::noise_free_quantum`]), whose error is fixed by the signal and by
+    /// where the ADC's grid sits — held for seconds on a settling tail and largely absorbed by
+    /// the parameters, so the residuals cannot show it: that channel enters as its quantiser on
+    /// the model's values averaged over the grid's place
+    /// ([`crate::input_uncertainty::grid_phase_score_covariance`]).
     fn score_covariance_of(&self, r: &[f64], jac: &DMatrix<f64>) -> Option<DMatrix<f64>> {
         let p = jac.ncols();
         if r.len() != jac.nrows() {
             return None;
         }
         // One accumulator per (test, channel): the residuals stream interleaved across
-        // channels, in the order of `for_each` (any parameters give the same order).
+        // channels, in the order of `for_each` (any parameters give the same order). A
+        // noise-free channel keeps its rows and the model's values for the grid instead.
         let mut series: Vec<Vec<NeweyWest>> = self
             .tests
             .iter()
             .map(|w| w.channels.iter().map(|_| NeweyWest::new(p, w.n)).collect())
             .collect();
+        let mut held: Vec<Vec<(Vec<usize>, Vec<f64>)>> = self
+            .tests
+            .iter()
+            .map(|w| w.channels.iter().map(|_| Default::default()).collect())
+            .collect();
         let mut row = 0;
         let mut score = vec![0.0; p];
-        self.for_each([1.0; 6], |k, c, _, _: f64, _, _| {
-            if let (Some(&ri), Some(nw)) = (r.get(row), series[k].get_mut(c)) {
+        self.for_each([1.0; 6], |k, c, _, _: f64, y, sigma| {
+            if self.tests[k].channels[c].noise_free_quantum.is_some() {
+                if let Some(&ri) = r.get(row) {
+                    let (rows, model) = &mut held[k][c];
+                    rows.push(row);
+                    model.push(y + sigma * ri);
+                }
+            } else if let (Some(&ri), Some(nw)) = (r.get(row), series[k].get_mut(c)) {
                 for (j, g) in score.iter_mut().enumerate() {
                     *g = ri * jac[(row, j)];
                 }
@@ -530,8 +560,16 @@ impl NuisanceProblem for FullProblem {
             return None;
         }
         let mut total = DMatrix::zeros(p, p);
-        for nw in series.iter().flatten() {
-            total += nw.finish()?;
+        for (w, (nws, held)) in self.tests.iter().zip(series.iter().zip(&held)) {
+            for (ch, (nw, (rows, model))) in w.channels.iter().zip(nws.iter().zip(held)) {
+                match ch.noise_free_quantum {
+                    Some(q) => {
+                        let rows = jac.select_rows(rows.iter());
+                        total += grid_phase_score_covariance(model, q, rows.as_view(), ch.sigma);
+                    }
+                    None => total += nw.finish()?,
+                }
+            }
         }
         Some(total)
     }
@@ -624,9 +662,17 @@ pub fn identify_full_with_inputs(
             t_first: t.t_first + input.delay_s,
             dt: t.dt,
             n,
-            channels,
             current_offset: 0.0,
-            settled: settled_current(t.current, input.current_lsb_a),
+            // A current read without noise enters the score covariance whole, by its grid's
+            // place, and gets no settled offset: the offset's first sample is where the
+            // readings last changed code, so it would take up the held code's error exactly
+            // where the grid puts it (biasing f and J, and leaving Ts far inside an interval
+            // that counts the code as unknown).
+            settled: match channels[0].noise_free_quantum {
+                Some(_) => None,
+                None => settled_current(t.current, input.current_lsb_a),
+            },
+            channels,
         });
     }
     let inputs = weighted

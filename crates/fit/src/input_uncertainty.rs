@@ -348,7 +348,9 @@ pub struct StepInputs {
     /// that settles within one step reads one code (or a few, with little noise) for the rest
     /// of the record: its quantisation error is then a constant offset the parameters absorb
     /// and the residuals cannot show, so it enters as an input of variance
-    /// [`quantisation_bias_variance`].
+    /// [`quantisation_bias_variance`]. A current read without noise (below a tenth of a step)
+    /// instead enters the intervals whole, by its quantiser on the fitted model averaged over
+    /// the unknown place of its ADC's grid, with no such offset.
     pub current_lsb_a: f64,
 }
 
