@@ -20,7 +20,9 @@ use crate::input_uncertainty::{
 use crate::lm::{solve, LeastSquares, LmSettings, NormalEquations, Termination};
 use crate::parameters::{names_of, units_of, EffectEstimate, Parameters, MOTOR};
 use crate::plausibility::{assess, RecordFacts, Refusal};
-use crate::stats::{sandwich_uncertainty, NeweyWest};
+use crate::stats::{
+    newey_west_lags, sandwich_uncertainty, scaled_inverse, NeweyWest, SeriesLayout,
+};
 
 /// Names of the six parameters, in the order of every array here.
 pub const PARAM_NAMES: [&str; 6] = ["R", "L", "k", "f", "J", "Ts"];
@@ -374,7 +376,31 @@ impl FullProblem {
     /// weights `wₗ = 1 − l/(L+1)`; channels are taken as independent of each other.
     fn score_covariance(&self, theta: &[f64]) -> Option<DMatrix<f64>> {
         let (r, jac) = self.linear_parts(theta)?;
-        self.score_covariance_of(&r, &jac)
+        self.fitted_score_covariance(&r, &jac, &scaled_inverse(&jac.tr_mul(&jac))?)
+    }
+
+    /// The series of every residual in the order of `for_each` (one per channel of each
+    /// test, as `score_covariance_of` takes them), with that accumulator's lags.
+    fn series_layout(&self) -> SeriesLayout {
+        let first: Vec<usize> = self
+            .tests
+            .iter()
+            .scan(0, |at, w| {
+                let here = *at;
+                *at += w.channels.len();
+                Some(here)
+            })
+            .collect();
+        let lags = self
+            .tests
+            .iter()
+            .flat_map(|w| w.channels.iter().map(|_| newey_west_lags(w.n).max(1)))
+            .collect();
+        let mut series = Vec::with_capacity(self.n_residuals);
+        self.for_each([1.0; 6], |k, c, _, _: f64, _, _| {
+            series.push(Some(first[k] + c));
+        });
+        SeriesLayout { series, lags }
     }
 }
 
@@ -704,8 +730,12 @@ pub(crate) trait WeightedProblem: LeastSquares {
     fn sigmas_mut(&mut self) -> Vec<&mut f64>;
     /// Fit quality of every channel at `theta`, in the order of [`Self::sigmas_mut`].
     fn channel_quality(&self, theta: &[f64]) -> Vec<ChannelQuality>;
-    /// Newey–West covariance of the score `Jᵀr` at `theta` (channels independent).
+    /// Newey–West covariance of the score `Jᵀr` at `theta` (channels independent), with what
+    /// the fitted residuals miss of it ([`crate::stats::fitted_residual_bias`]).
     fn score_covariance(&self, theta: &[f64]) -> Option<DMatrix<f64>>;
+    /// Which series (channel of a record) each weighted residual belongs to, in residual
+    /// order, and each series' Newey–West lag.
+    fn series_layout(&self) -> SeriesLayout;
     /// What the records show, for the plausibility of the result.
     fn facts(&self) -> RecordFacts;
     /// Every fitted channel at `theta`, measured and modelled.
@@ -927,6 +957,10 @@ impl WeightedProblem for FullProblem {
 
     fn score_covariance(&self, theta: &[f64]) -> Option<DMatrix<f64>> {
         FullProblem::score_covariance(self, theta)
+    }
+
+    fn series_layout(&self) -> SeriesLayout {
+        FullProblem::series_layout(self)
     }
 
     fn facts(&self) -> RecordFacts {

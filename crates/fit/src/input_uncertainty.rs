@@ -24,7 +24,7 @@ use nalgebra::{DMatrix, DVector};
 use crate::error::FitError;
 use crate::full_model::{fit_weighted, set_intervals, FullFit, WeightedProblem};
 use crate::lm::LmSettings;
-use crate::stats::scaled_inverse;
+use crate::stats::{fitted_residual_bias, scaled_inverse};
 
 /// Fraction of a level's samples at the column's extreme code above which that code is taken as
 /// an ADC rail (a Gaussian level away from a rail puts a vanishing fraction, about `1/n`, in its
@@ -429,6 +429,20 @@ pub(crate) trait NuisanceProblem: WeightedProblem {
     /// [`Self::residual_vector`]) for any Jacobian columns `jac` (θ and inputs alike), with the
     /// problem's own independent series and runs of errors that move together.
     fn score_covariance_of(&self, r: &[f64], jac: &DMatrix<f64>) -> Option<DMatrix<f64>>;
+    /// [`Self::score_covariance_of`] with what the fitted residuals miss of it
+    /// ([`fitted_residual_bias`]), `h_inv` being the inverse of the normal matrix the fit
+    /// solved for `jac`'s columns (a prior on some of them included).
+    fn fitted_score_covariance(
+        &self,
+        r: &[f64],
+        jac: &DMatrix<f64>,
+        h_inv: &DMatrix<f64>,
+    ) -> Option<DMatrix<f64>> {
+        Some(
+            self.score_covariance_of(r, jac)?
+                + fitted_residual_bias(r, jac, h_inv, &self.series_layout())?,
+        )
+    }
 }
 
 /// The joint linearisation at one point.
@@ -572,7 +586,7 @@ pub(crate) fn fit_with_inputs<P: NuisanceProblem>(
     let theta = fit.theta.clone();
     if let Some(joint) = linearise(problem, &theta) {
         let cov = problem
-            .score_covariance_of(&joint.r, &joint.jac)
+            .fitted_score_covariance(&joint.r, &joint.jac, &joint.h_inv)
             .and_then(|score| joint.theta_covariance(&score, p));
         let dof = joint.r.len().saturating_sub(p);
         set_intervals(&mut fit, problem.parameters(), cov, dof);

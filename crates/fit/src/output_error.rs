@@ -38,7 +38,9 @@ use crate::mechanical::{
 use crate::parameters::Parameters;
 use crate::plausibility::RecordFacts;
 use crate::signal::Butterworth;
-use crate::stats::{equal_runs, newey_west_run_covariance};
+use crate::stats::{
+    equal_runs, newey_west_lags, newey_west_run_covariance, scaled_inverse, SeriesLayout,
+};
 use crate::step_location::uniform_period;
 
 /// Step of the forward-difference Jacobian in `θ = ln p` (relative step of each parameter).
@@ -57,6 +59,9 @@ const SPEED_BOUND_MARGIN: f64 = 1.5;
 /// Share of the records' noise floor the integration error an effect causes at speed (the
 /// cogging ripple) may reach ([`Simulator::with_speed_bound_and_tolerance`]).
 const SPEED_ERROR_SHARE: f64 = 0.01;
+/// Mean run of equal readings, in rows, beyond which [`OeProblem`]'s series layout takes no
+/// longer lag windows for the fitted residuals' correction.
+const MAX_LAG_RUN_LENGTH: f64 = 8.0;
 /// A voltage is piecewise constant when it has at most one jump per this many samples.
 const MIN_SAMPLES_PER_LEVEL: usize = 20;
 
@@ -599,7 +604,31 @@ impl WeightedProblem for OeProblem {
 
     fn score_covariance(&self, theta: &[f64]) -> Option<DMatrix<f64>> {
         let (r, jac) = self.jacobian(theta)?;
-        self.score_covariance_of(&r, &jac)
+        self.fitted_score_covariance(&r, &jac, &scaled_inverse(&jac.tr_mul(&jac))?)
+    }
+
+    /// One series per channel of each record, in order; a channel read without noise is left
+    /// out (its covariance is its quantiser's). The lag is the run covariance's, in runs of
+    /// equal readings, taken as rows at the channel's mean run length (at most
+    /// [`MAX_LAG_RUN_LENGTH`] rows a run, so that a channel that barely changes costs no more
+    /// than a few passes).
+    fn series_layout(&self) -> SeriesLayout {
+        let mut layout = SeriesLayout::default();
+        for (s, ch) in self
+            .records
+            .iter()
+            .flat_map(|rec| &rec.channels)
+            .enumerate()
+        {
+            let len = ch.data.len();
+            let runs = equal_runs(&ch.data).len().max(1);
+            let run_length = (len as f64 / runs as f64).min(MAX_LAG_RUN_LENGTH);
+            let lags = newey_west_lags(runs).max(1) as f64 * run_length;
+            layout.lags.push(lags.round().max(1.0) as usize);
+            let id = ch.noise_free_quantum.is_none().then_some(s);
+            layout.series.extend(std::iter::repeat_n(id, len));
+        }
+        layout
     }
 
     fn fitted_channels(&self, theta: &[f64]) -> Vec<FittedChannel> {

@@ -213,6 +213,105 @@ pub fn equal_runs(data: &[f64]) -> Vec<usize> {
     runs
 }
 
+/// How the rows of a weighted residual vector fall into the independent series (a channel of
+/// a record) that a Newey–West estimate of the score covariance takes one at a time.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub(crate) struct SeriesLayout {
+    /// The series of each row, `None` for a row the estimate does not take from its residual
+    /// (a channel read without noise, whose covariance comes from its quantiser instead).
+    /// The rows of one series are in time order.
+    pub series: Vec<Option<usize>>,
+    /// The Newey–West lag of each series, in rows (Bartlett weights `1 − l/(L + 1)`).
+    pub lags: Vec<usize>,
+}
+
+/// Row `i` of a row-major matrix of `q` columns.
+fn row(m: &[f64], i: usize, q: usize) -> &[f64] {
+    &m[i * q..(i + 1) * q]
+}
+
+/// The part of the score covariance that a Newey–West estimate from the fitted residuals
+/// misses (p × p, in the units of `jac`'s columns).
+///
+/// The residuals at the solution are not the errors: the fit removes from them their
+/// projection on the Jacobian's columns, so that with errors of variance `v`
+/// `E[r rᵀ] = v (𝟙 − P)`, `P = J H⁻¹ Jᵀ` (`h_inv` = `H⁻¹`, the inverse of the normal matrix the
+/// fit solved, a prior on some columns included), and the Newey–West estimate
+/// `Σ_{|i−j|≤L} wᵢⱼ rᵢ rⱼ JᵢJⱼᵀ` has the expectation `v Σ JᵢJᵢᵀ − v Σ_{|i−j|≤L} wᵢⱼ Pᵢⱼ JᵢJⱼᵀ`.
+/// The missing term is small for a parameter that every part of a long record informs, but
+/// not for one that a few samples determine — the inductance from a current rise a few samples
+/// long, whose samples all fall within one lag window: there the normal equations hold the
+/// residuals' score near zero, and the estimate with them. This returns that term,
+/// `Σ_series v_s Σ_{|i−j|≤L_s} wᵢⱼ Pᵢⱼ JᵢJⱼᵀ`, each series' `v_s` estimated as
+/// `Σ rᵢ²/Σ (1 − Pᵢᵢ)` (its diagonal is the leverage correction of HC2-type estimates).
+/// `None` if the shapes do not agree or an entry is not finite.
+pub(crate) fn fitted_residual_bias(
+    r: &[f64],
+    jac: &DMatrix<f64>,
+    h_inv: &DMatrix<f64>,
+    layout: &SeriesLayout,
+) -> Option<DMatrix<f64>> {
+    let (n, q) = jac.shape();
+    if r.len() != n || layout.series.len() != n || h_inv.shape() != (q, q) {
+        return None;
+    }
+    // Rows as contiguous slices: J and K = J H⁻¹ (H⁻¹ symmetric), row-major.
+    let k = jac * h_inv;
+    let row_major = |m: &DMatrix<f64>| -> Vec<f64> { m.transpose().as_slice().to_vec() };
+    let (jr, kr) = (row_major(jac), row_major(&k));
+    let dot = |a: &[f64], b: &[f64]| -> f64 { a.iter().zip(b).map(|(x, y)| x * y).sum() };
+    let mut rows: Vec<Vec<usize>> = vec![Vec::new(); layout.lags.len()];
+    for (i, s) in layout.series.iter().enumerate() {
+        if let Some(s) = s {
+            rows.get_mut(*s)?.push(i);
+        }
+    }
+    let mut total = vec![0.0; q * q];
+    let mut c = vec![0.0; q];
+    for (idx, &lags) in rows.iter().zip(&layout.lags) {
+        let m = idx.len();
+        if m == 0 {
+            continue;
+        }
+        let leverage: f64 = idx
+            .iter()
+            .map(|&i| dot(row(&kr, i, q), row(&jr, i, q)))
+            .sum();
+        let free = m as f64 - leverage;
+        if free <= 0.0 {
+            continue;
+        }
+        let v = idx.iter().map(|&i| r[i] * r[i]).sum::<f64>() / free;
+        let lags = lags.max(1);
+        let reach = lags.min(m - 1);
+        for (a, &i) in idx.iter().enumerate() {
+            c.fill(0.0);
+            let ki = row(&kr, i, q);
+            for (b, &j) in idx
+                .iter()
+                .enumerate()
+                .take((a + reach + 1).min(m))
+                .skip(a.saturating_sub(reach))
+            {
+                let weight = 1.0 - a.abs_diff(b) as f64 / (lags as f64 + 1.0);
+                let jj = row(&jr, j, q);
+                let w = weight * dot(ki, jj);
+                for (cell, x) in c.iter_mut().zip(jj) {
+                    *cell += w * x;
+                }
+            }
+            for (ja, out) in row(&jr, i, q).iter().zip(total.chunks_exact_mut(q)) {
+                for (cell, cb) in out.iter_mut().zip(&c) {
+                    *cell += v * ja * cb;
+                }
+            }
+        }
+    }
+    let m = DMatrix::from_row_slice(q, q, &total);
+    let sym = (&m + m.transpose()) * 0.5;
+    sym.iter().all(|x| x.is_finite()).then_some(sym)
+}
+
 /// Newey–West accumulator of the covariance of a score `Σᵢ gᵢ` over one time series of
 /// per-sample scores `gᵢ = rᵢ ∂rᵢ/∂θ` (`p` parameters):
 /// `Σᵢ gᵢgᵢᵀ + Σₗ wₗ Σᵢ (gᵢgᵢ₋ₗᵀ + gᵢ₋ₗgᵢᵀ)` with Bartlett weights `wₗ = 1 − l/(L+1)`.
@@ -595,6 +694,45 @@ mod tests {
         }
         assert!((student_t_quantile(0.5, 7.0)).abs() < 1e-12);
         assert!((student_t_quantile(0.025, 10.0) + 2.228).abs() < 5e-4);
+    }
+
+    /// A parameter that three samples determine (a rise a few samples long) beside one the
+    /// whole series informs: over many draws of white noise the Newey–West estimate from the
+    /// fitted residuals falls well short of the true score variance `JᵀJ` for the first,
+    /// while with [`fitted_residual_bias`] added it is right for both.
+    #[test]
+    fn fitted_residual_bias_restores_the_score_variance_of_a_local_parameter() {
+        let n = 400;
+        let jac = DMatrix::from_fn(n, 2, |i, j| match j {
+            0 => 1.0,
+            _ => [3.0, 2.0, 1.0]
+                .get(i.wrapping_sub(10))
+                .copied()
+                .unwrap_or(0.0),
+        });
+        let h_inv = scaled_inverse(&jac.tr_mul(&jac)).unwrap();
+        let projector = &jac * &h_inv * jac.transpose();
+        let layout = SeriesLayout {
+            series: vec![Some(0); n],
+            lags: vec![newey_west_lags(n)],
+        };
+        let truth = jac.tr_mul(&jac);
+        let mut rng = motor_model::NoiseRng::new(5);
+        let draws = 4000;
+        let (mut plain, mut corrected) = (DMatrix::zeros(2, 2), DMatrix::zeros(2, 2));
+        for _ in 0..draws {
+            let e = nalgebra::DVector::from_fn(n, |_, _| rng.normal());
+            let r: Vec<f64> = (&e - &projector * &e).iter().copied().collect();
+            let nw = newey_west_score_covariance(&r, &jac, &[n]).unwrap();
+            corrected += &nw + fitted_residual_bias(&r, &jac, &h_inv, &layout).unwrap();
+            plain += nw;
+        }
+        let (plain, corrected) = (plain / draws as f64, corrected / draws as f64);
+        for k in 0..2 {
+            let ratio = corrected[(k, k)] / truth[(k, k)];
+            assert!((ratio - 1.0).abs() < 0.05, "parameter {k}: {ratio}");
+        }
+        assert!(plain[(1, 1)] < 0.5 * truth[(1, 1)], "{}", plain[(1, 1)]);
     }
 
     /// The whole-vector Newey–West covariance equals the accumulator's, series by series.
