@@ -380,7 +380,9 @@ impl FullProblem {
     }
 
     /// The series of every residual in the order of `for_each` (one per channel of each
-    /// test, as `score_covariance_of` takes them), with that accumulator's lags.
+    /// test, as `score_covariance_of` takes them), with that accumulator's lags; a channel read
+    /// without noise is left out (its covariance is its quantiser's,
+    /// [`ChannelData::noise_free_quantum`]).
     fn series_layout(&self) -> SeriesLayout {
         let first: Vec<usize> = self
             .tests
@@ -398,7 +400,8 @@ impl FullProblem {
             .collect();
         let mut series = Vec::with_capacity(self.n_residuals);
         self.for_each([1.0; 6], |k, c, _, _: f64, _, _| {
-            series.push(Some(first[k] + c));
+            let noisy = self.tests[k].channels[c].noise_free_quantum.is_none();
+            series.push(noisy.then_some(first[k] + c));
         });
         SeriesLayout { series, lags }
     }
