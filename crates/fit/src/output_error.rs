@@ -239,6 +239,10 @@ struct OeProblem {
     /// RK4 steps this many times the simulator's default ([`Simulator::with_step_factor`]; 1
     /// for every fit but the diagnosis's).
     step_factor: f64,
+    /// Whether the channels' noise levels were given ([`OeProblem::set_sigmas`]) and are
+    /// kept: the fit is then one stage in those weights, not reweighted by its own residuals
+    /// ([`crate::full_model::WeightedProblem::reweights`]).
+    fixed_sigmas: bool,
 }
 
 impl OeProblem {
@@ -284,7 +288,25 @@ impl OeProblem {
             max_step_bits,
             speed_bound,
             step_factor: 1.0,
+            fixed_sigmas: false,
         })
+    }
+
+    /// Weights each channel by the noise level `sigmas` gives it (`(record, channel, σ)`;
+    /// channels it does not list, or lists with a σ that is not positive and finite, keep their
+    /// own scatter) and keeps those weights through the fit.
+    fn set_sigmas(&mut self, sigmas: &[(usize, Channel, f64)]) {
+        for (k, rec) in self.records.iter_mut().enumerate() {
+            for ch in &mut rec.channels {
+                if let Some(s) = sigmas
+                    .iter()
+                    .find(|(r, c, s)| *r == k && *c == ch.kind && *s > 0.0 && s.is_finite())
+                {
+                    ch.sigma = s.2;
+                }
+            }
+        }
+        self.fixed_sigmas = true;
     }
 
     /// Starts record `k`'s simulation from `initial[k]` (all at rest when `initial` is empty),
@@ -557,6 +579,10 @@ impl WeightedProblem for OeProblem {
         &self.parameters
     }
 
+    fn reweights(&self) -> bool {
+        !self.fixed_sigmas
+    }
+
     fn facts(&self) -> RecordFacts {
         let mut facts = RecordFacts::default();
         for r in &self.records {
@@ -705,16 +731,7 @@ pub(crate) fn output_error_sensitivity(
     step_factor: f64,
 ) -> Result<Sensitivity, FitError> {
     let mut problem = OeProblem::new(records, effects, f64::INFINITY)?;
-    for (k, rec) in problem.records.iter_mut().enumerate() {
-        for ch in &mut rec.channels {
-            if let Some(s) = sigmas
-                .iter()
-                .find(|(r, c, s)| *r == k && *c == ch.kind && *s > 0.0 && s.is_finite())
-            {
-                ch.sigma = s.2;
-            }
-        }
-    }
+    problem.set_sigmas(sigmas);
     let theta = problem.parameters.encode(motor, effects)?;
     let not_simulable = || {
         bad(
@@ -902,6 +919,34 @@ pub(crate) fn fit_output_error(
     settings: LmSettings,
     step_factor: f64,
 ) -> Result<FullFit, FitError> {
+    fit_output_error_weighted(
+        records,
+        priors,
+        initial,
+        start,
+        effects,
+        settings,
+        step_factor,
+        None,
+    )
+}
+
+/// [`fit_output_error`] with every channel weighted by the noise level `sigmas` gives it
+/// (`(record, channel, σ)`, as [`output_error_sensitivity`] takes them) in one stage, instead of
+/// by its own scatter and then by its own residual at the first solution; `None`: as
+/// [`fit_output_error`]. Models fitted in the same fixed weights are nested: the fall of their
+/// weighted cost is a likelihood ratio.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn fit_output_error_weighted(
+    records: &[ExcitedRecord<'_>],
+    priors: &[Vec<LevelPrior>],
+    initial: &[InitialState],
+    start: &MotorParams,
+    effects: &Effects,
+    settings: LmSettings,
+    step_factor: f64,
+    sigmas: Option<&[(usize, Channel, f64)]>,
+) -> Result<FullFit, FitError> {
     if !priors.is_empty() && priors.len() != records.len() {
         return Err(bad(
             "level priors",
@@ -917,6 +962,9 @@ pub(crate) fn fit_output_error(
     }
     let mut problem = OeProblem::new(records, effects, f64::INFINITY)?;
     problem.step_factor = step_factor;
+    if let Some(sigmas) = sigmas {
+        problem.set_sigmas(sigmas);
+    }
     problem.set_initial_states(initial, effects)?;
     let theta0 = problem.with_state_guesses(problem.parameters.encode(start, effects)?);
     let h = problem

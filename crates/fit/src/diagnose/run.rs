@@ -49,7 +49,8 @@ use crate::error::FitError;
 use crate::full_model::{Channel, FittedChannel, FullFit, PARAM_NAMES};
 use crate::lm::LmSettings;
 use crate::output_error::{
-    fit_output_error, output_error_sensitivity, predict_with_step_factor, ExcitedRecord,
+    fit_output_error, fit_output_error_weighted, output_error_sensitivity,
+    predict_with_step_factor, ExcitedRecord,
 };
 use crate::parameters::EffectEstimate;
 
@@ -1371,7 +1372,11 @@ fn run_stage(
     let refit = |k: usize| -> Refit {
         let kind = kinds[k];
         let effects = base.effects.with(starts[k]);
-        let outcome = fit_output_error(
+        // In the weights the base model was fitted and every candidate is judged in (the
+        // nominal fit's channel levels): a refit reweighted by its own residuals would
+        // minimise another cost than the one its likelihood-ratio test and held-out blocks
+        // measure, and could trade a channel the effect does not touch for one it does.
+        let outcome = fit_output_error_weighted(
             base.train,
             &[],
             &[],
@@ -1379,6 +1384,7 @@ fn run_stage(
             &effects,
             settings.lm,
             settings.step_factor,
+            Some(sigmas),
         )
         .map_err(|e| e.to_string())
         .and_then(|fit| match (&fit.refusal, fit.failure()) {
