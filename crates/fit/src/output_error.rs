@@ -1359,3 +1359,56 @@ fn equation_error_estimate(
     let ts = if ts > 0.0 { ts } else { 1e-3 * peak_torque };
     MotorParams::new(r, l, k, f, j, ts).map_err(FitError::model("equation-error start (Eq. (2))"))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use motor_model::MeasurementModel;
+
+    #[test]
+    fn given_channel_weights_are_kept_through_the_fit() {
+        let motor = MotorParams::new(2.0, 2e-3, 0.05, 4e-4, 2e-5, 4e-3).expect("valid motor");
+        let step = Input::step(6.0, 0.05).expect("a step");
+        let trace =
+            motor_model::simulate(&motor, Effects::none(), &step, 0.3, 5000.0).expect("a trace");
+        let record = MeasurementModel::paper_logger(&trace, 3)
+            .apply(&trace)
+            .expect("a record");
+        let input = voltage_input(&record.t, &record.voltage).expect("a waveform");
+        let records = [ExcitedRecord {
+            input: &input,
+            dt: 2e-4,
+            current: &record.current,
+            speed: None,
+            position: record.position.as_deref(),
+            exclude_current: None,
+            exclude_speed: None,
+        }];
+        let start = MotorParams::new(2.2, 1.8e-3, 0.048, 5e-4, 2.2e-5, 3.5e-3).expect("a start");
+        let settings = LmSettings::default();
+        let own = fit_output_error(&records, &[], &[], &start, &Effects::none(), settings, 1.0)
+            .expect("a fit");
+        // Weights three times the fit's own: kept, not replaced by the residual's level.
+        let given: Vec<(usize, Channel, f64)> = own
+            .quality
+            .iter()
+            .map(|q| (q.test, q.channel, 3.0 * q.noise_std))
+            .collect();
+        let kept = fit_output_error_weighted(
+            &records,
+            &[],
+            &[],
+            &own.params,
+            &Effects::none(),
+            settings,
+            1.0,
+            Some(&given),
+        )
+        .expect("a fit");
+        assert!(kept.termination.converged(), "{:?}", kept.termination);
+        for (q, (_, _, sigma)) in kept.quality.iter().zip(&given) {
+            assert_eq!(q.noise_std, *sigma, "{q:?}");
+            assert!(q.rms_residual < 0.5 * sigma, "{q:?}");
+        }
+    }
+}
