@@ -905,39 +905,19 @@ pub fn identify_output_error_with_initial_states(
     effects: &Effects,
     settings: LmSettings,
 ) -> Result<FullFit, FitError> {
-    fit_output_error(records, priors, initial, start, effects, settings, 1.0)
-}
-
-/// [`identify_output_error_with_initial_states`] on RK4 steps `step_factor` times the
-/// simulator's default ([`Simulator::with_step_factor`]).
-pub(crate) fn fit_output_error(
-    records: &[ExcitedRecord<'_>],
-    priors: &[Vec<LevelPrior>],
-    initial: &[InitialState],
-    start: &MotorParams,
-    effects: &Effects,
-    settings: LmSettings,
-    step_factor: f64,
-) -> Result<FullFit, FitError> {
-    fit_output_error_weighted(
-        records,
-        priors,
-        initial,
-        start,
-        effects,
-        settings,
-        step_factor,
-        None,
+    fit_output_error(
+        records, priors, initial, start, effects, settings, 1.0, None,
     )
 }
 
-/// [`fit_output_error`] with every channel weighted by the noise level `sigmas` gives it
-/// (`(record, channel, σ)`, as [`output_error_sensitivity`] takes them) in one stage, instead of
-/// by its own scatter and then by its own residual at the first solution; `None`: as
-/// [`fit_output_error`]. Models fitted in the same fixed weights are nested: the fall of their
+/// [`identify_output_error_with_initial_states`] on RK4 steps `step_factor` times the
+/// simulator's default ([`Simulator::with_step_factor`]), every channel weighted by the noise
+/// level `sigmas` gives it (`(record, channel, σ)`, as [`output_error_sensitivity`] takes
+/// them) in one stage when given; without, by its own scatter and then by its own residual at
+/// the first solution. Models fitted in the same given weights are nested: the fall of their
 /// weighted cost is a likelihood ratio.
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn fit_output_error_weighted(
+pub(crate) fn fit_output_error(
     records: &[ExcitedRecord<'_>],
     priors: &[Vec<LevelPrior>],
     initial: &[InitialState],
@@ -1386,15 +1366,24 @@ mod tests {
         }];
         let start = MotorParams::new(2.2, 1.8e-3, 0.048, 5e-4, 2.2e-5, 3.5e-3).expect("a start");
         let settings = LmSettings::default();
-        let own = fit_output_error(&records, &[], &[], &start, &Effects::none(), settings, 1.0)
-            .expect("a fit");
+        let own = fit_output_error(
+            &records,
+            &[],
+            &[],
+            &start,
+            &Effects::none(),
+            settings,
+            1.0,
+            None,
+        )
+        .expect("a fit");
         // Weights three times the fit's own: kept, not replaced by the residual's level.
         let given: Vec<(usize, Channel, f64)> = own
             .quality
             .iter()
             .map(|q| (q.test, q.channel, 3.0 * q.noise_std))
             .collect();
-        let kept = fit_output_error_weighted(
+        let kept = fit_output_error(
             &records,
             &[],
             &[],

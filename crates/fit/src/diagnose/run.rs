@@ -49,8 +49,7 @@ use crate::error::FitError;
 use crate::full_model::{Channel, FittedChannel, FullFit, PARAM_NAMES};
 use crate::lm::LmSettings;
 use crate::output_error::{
-    fit_output_error, fit_output_error_weighted, output_error_sensitivity,
-    predict_with_step_factor, ExcitedRecord,
+    fit_output_error, output_error_sensitivity, predict_with_step_factor, ExcitedRecord,
 };
 use crate::parameters::EffectEstimate;
 
@@ -1044,6 +1043,7 @@ pub fn diagnose(
             &Effects::none(),
             settings.lm,
             settings.step_factor,
+            None,
         )
     };
     let predict_nominal = |records: &[ExcitedRecord<'_>], motor: &MotorParams| {
@@ -1376,7 +1376,7 @@ fn run_stage(
         // nominal fit's channel levels): a refit reweighted by its own residuals would
         // minimise another cost than the one its likelihood-ratio test and held-out blocks
         // measure, and could trade a channel the effect does not touch for one it does.
-        let outcome = fit_output_error_weighted(
+        let outcome = fit_output_error(
             base.train,
             &[],
             &[],
