@@ -27,6 +27,10 @@
 //! their peaks). Each stage first *screens* every candidate by its score statistic at the base
 //! model ([`crate::diagnose::screen`]: one linearisation, no fit); only the best
 //! [`DiagnoseSettings::refits`] are refitted with the motor and judged by the verdict's tests.
+//! Every refit weights each channel by the noise level the nominal fit found for it, in one
+//! stage (not reweighted by its own residuals): the refit then minimises the very cost its
+//! likelihood-ratio statistic and held-out blocks measure, and cannot trade a channel the
+//! effect does not touch for one it does.
 //! A candidate is *not testable from these records* when its signature is lost in the base
 //! model's (screening); one that is testable but whose refit leaves its parameters undetermined
 //! (no interval, or one wider than a hundred times its value) reads *tested, no evidence* when
