@@ -731,6 +731,11 @@ pub(crate) trait WeightedProblem: LeastSquares {
     fn parameters(&self) -> &Parameters;
     /// The noise level of every channel, in a fixed order.
     fn sigmas_mut(&mut self) -> Vec<&mut f64>;
+    /// Whether [`fit_weighted`] reweights each channel by its own residual at the first
+    /// solution (the default); `false` when the noise levels were given and are kept.
+    fn reweights(&self) -> bool {
+        true
+    }
     /// Fit quality of every channel at `theta`, in the order of [`Self::sigmas_mut`].
     fn channel_quality(&self, theta: &[f64]) -> Vec<ChannelQuality>;
     /// Newey–West covariance of the score `Jᵀr` at `theta` (channels independent), with what
@@ -745,7 +750,8 @@ pub(crate) trait WeightedProblem: LeastSquares {
     fn fitted_channels(&self, theta: &[f64]) -> Vec<FittedChannel>;
 }
 
-/// Fits `problem` from `theta0` in two stages and reports the parameters with their intervals.
+/// Fits `problem` from `theta0` in two stages (one when it keeps given weights,
+/// [`WeightedProblem::reweights`]) and reports the parameters with their intervals.
 pub(crate) fn fit_weighted<P: WeightedProblem>(
     problem: &mut P,
     theta0: &[f64],
@@ -755,9 +761,11 @@ pub(crate) fn fit_weighted<P: WeightedProblem>(
     // Second stage: weight each channel by its own residual RMS at the first solution, so that
     // every channel's weighted residuals have unit variance and the pooled variance behind the
     // intervals describes each of them (feasible generalised least squares). Skipped when the
-    // first stage did not converge or a channel fits exactly (noise-free data).
+    // problem keeps given weights, the first stage did not converge or a channel fits exactly
+    // (noise-free data).
     let first_iterations = first.iterations;
-    let (report, iterations) = if first.termination.converged()
+    let (report, iterations) = if problem.reweights()
+        && first.termination.converged()
         && problem.parameters().decode(&first.params).is_some()
     {
         let rms = problem.channel_quality(&first.params);

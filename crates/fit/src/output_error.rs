@@ -244,6 +244,10 @@ struct OeProblem {
     /// RK4 steps this many times the simulator's default ([`Simulator::with_step_factor`]; 1
     /// for every fit but the diagnosis's).
     step_factor: f64,
+    /// Whether the channels' noise levels were given ([`OeProblem::set_sigmas`]) and are
+    /// kept: the fit is then one stage in those weights, not reweighted by its own residuals
+    /// ([`crate::full_model::WeightedProblem::reweights`]).
+    fixed_sigmas: bool,
 }
 
 impl OeProblem {
@@ -289,7 +293,25 @@ impl OeProblem {
             max_step_bits,
             speed_bound,
             step_factor: 1.0,
+            fixed_sigmas: false,
         })
+    }
+
+    /// Weights each channel by the noise level `sigmas` gives it (`(record, channel, σ)`;
+    /// channels it does not list, or lists with a σ that is not positive and finite, keep their
+    /// own scatter) and keeps those weights through the fit.
+    fn set_sigmas(&mut self, sigmas: &[(usize, Channel, f64)]) {
+        for (k, rec) in self.records.iter_mut().enumerate() {
+            for ch in &mut rec.channels {
+                if let Some(s) = sigmas
+                    .iter()
+                    .find(|(r, c, s)| *r == k && *c == ch.kind && *s > 0.0 && s.is_finite())
+                {
+                    ch.sigma = s.2;
+                }
+            }
+        }
+        self.fixed_sigmas = true;
     }
 
     /// Starts record `k`'s simulation from `initial[k]` (all at rest when `initial` is empty),
@@ -562,6 +584,10 @@ impl WeightedProblem for OeProblem {
         &self.parameters
     }
 
+    fn reweights(&self) -> bool {
+        !self.fixed_sigmas
+    }
+
     fn facts(&self) -> RecordFacts {
         let mut facts = RecordFacts::default();
         for r in &self.records {
@@ -734,16 +760,7 @@ pub(crate) fn output_error_sensitivity(
     step_factor: f64,
 ) -> Result<Sensitivity, FitError> {
     let mut problem = OeProblem::new(records, effects, f64::INFINITY)?;
-    for (k, rec) in problem.records.iter_mut().enumerate() {
-        for ch in &mut rec.channels {
-            if let Some(s) = sigmas
-                .iter()
-                .find(|(r, c, s)| *r == k && *c == ch.kind && *s > 0.0 && s.is_finite())
-            {
-                ch.sigma = s.2;
-            }
-        }
-    }
+    problem.set_sigmas(sigmas);
     let theta = problem.parameters.encode(motor, effects)?;
     let not_simulable = || {
         bad(
@@ -917,11 +934,18 @@ pub fn identify_output_error_with_initial_states(
     effects: &Effects,
     settings: LmSettings,
 ) -> Result<FullFit, FitError> {
-    fit_output_error(records, priors, initial, start, effects, settings, 1.0)
+    fit_output_error(
+        records, priors, initial, start, effects, settings, 1.0, None,
+    )
 }
 
 /// [`identify_output_error_with_initial_states`] on RK4 steps `step_factor` times the
-/// simulator's default ([`Simulator::with_step_factor`]).
+/// simulator's default ([`Simulator::with_step_factor`]), every channel weighted by the noise
+/// level `sigmas` gives it (`(record, channel, σ)`, as [`output_error_sensitivity`] takes
+/// them) in one stage when given; without, by its own scatter and then by its own residual at
+/// the first solution. Models fitted in the same given weights are nested: the fall of their
+/// weighted cost is a likelihood ratio.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn fit_output_error(
     records: &[ExcitedRecord<'_>],
     priors: &[Vec<LevelPrior>],
@@ -930,6 +954,7 @@ pub(crate) fn fit_output_error(
     effects: &Effects,
     settings: LmSettings,
     step_factor: f64,
+    sigmas: Option<&[(usize, Channel, f64)]>,
 ) -> Result<FullFit, FitError> {
     if !priors.is_empty() && priors.len() != records.len() {
         return Err(bad(
@@ -946,6 +971,9 @@ pub(crate) fn fit_output_error(
     }
     let mut problem = OeProblem::new(records, effects, f64::INFINITY)?;
     problem.step_factor = step_factor;
+    if let Some(sigmas) = sigmas {
+        problem.set_sigmas(sigmas);
+    }
     problem.set_initial_states(initial, effects)?;
     let theta0 = problem.with_state_guesses(problem.parameters.encode(start, effects)?);
     let h = problem
@@ -1339,4 +1367,66 @@ fn equation_error_estimate(
         .fold(0.0f64, |m, i| m.max((k * i).abs()));
     let ts = if ts > 0.0 { ts } else { 1e-3 * peak_torque };
     MotorParams::new(r, l, k, f, j, ts).map_err(FitError::model("equation-error start (Eq. (2))"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use motor_model::MeasurementModel;
+
+    #[test]
+    fn given_channel_weights_are_kept_through_the_fit() {
+        let motor = MotorParams::new(2.0, 2e-3, 0.05, 4e-4, 2e-5, 4e-3).expect("valid motor");
+        let step = Input::step(6.0, 0.05).expect("a step");
+        let trace =
+            motor_model::simulate(&motor, Effects::none(), &step, 0.3, 5000.0).expect("a trace");
+        let record = MeasurementModel::paper_logger(&trace, 3)
+            .apply(&trace)
+            .expect("a record");
+        let input = voltage_input(&record.t, &record.voltage).expect("a waveform");
+        let records = [ExcitedRecord {
+            input: &input,
+            dt: 2e-4,
+            current: &record.current,
+            speed: None,
+            position: record.position.as_deref(),
+            exclude_current: None,
+            exclude_speed: None,
+        }];
+        let start = MotorParams::new(2.2, 1.8e-3, 0.048, 5e-4, 2.2e-5, 3.5e-3).expect("a start");
+        let settings = LmSettings::default();
+        let own = fit_output_error(
+            &records,
+            &[],
+            &[],
+            &start,
+            &Effects::none(),
+            settings,
+            1.0,
+            None,
+        )
+        .expect("a fit");
+        // Weights three times the fit's own: kept, not replaced by the residual's level.
+        let given: Vec<(usize, Channel, f64)> = own
+            .quality
+            .iter()
+            .map(|q| (q.test, q.channel, 3.0 * q.noise_std))
+            .collect();
+        let kept = fit_output_error(
+            &records,
+            &[],
+            &[],
+            &own.params,
+            &Effects::none(),
+            settings,
+            1.0,
+            Some(&given),
+        )
+        .expect("a fit");
+        assert!(kept.termination.converged(), "{:?}", kept.termination);
+        for (q, (_, _, sigma)) in kept.quality.iter().zip(&given) {
+            assert_eq!(q.noise_std, *sigma, "{q:?}");
+            assert!(q.rms_residual < 0.5 * sigma, "{q:?}");
+        }
+    }
 }

@@ -27,6 +27,10 @@
 //! their peaks). Each stage first *screens* every candidate by its score statistic at the base
 //! model ([`crate::diagnose::screen`]: one linearisation, no fit); only the best
 //! [`DiagnoseSettings::refits`] are refitted with the motor and judged by the verdict's tests.
+//! Every refit weights each channel by the noise level the nominal fit found for it, in one
+//! stage (not reweighted by its own residuals): the refit then minimises the very cost its
+//! likelihood-ratio statistic and held-out blocks measure, and cannot trade a channel the
+//! effect does not touch for one it does.
 //! A candidate is *not testable from these records* when its signature is lost in the base
 //! model's (screening); one that is testable but whose refit leaves its parameters undetermined
 //! (no interval, or one wider than a hundred times its value) reads *tested, no evidence* when
@@ -731,15 +735,17 @@ fn channel_scales(nominal: &FullFit, fitted: &[FittedChannel]) -> Vec<(usize, Ch
     sigmas
 }
 
-/// How many alternatives [`candidate_start`] picked `kind`'s fixed shape from by looking at the
-/// residual: for a cogging torque whose period count comes from the angle search, the counts
-/// that search tried ([`LocaliseSettings::max_harmonic`]); otherwise 1. Without the factor the
-/// period count that best matches the noise of an effect-free record would be named a cogging
-/// torque more often than α allows.
+/// How many alternatives `kind`'s fixed shape was picked from by looking at the residual: for
+/// a cogging torque whose period count comes from the angle search, the counts that search
+/// tried ([`LocaliseSettings::max_harmonic`]); for a brush drop, whose knee current is not
+/// fitted, the knees of [`candidate_starts`] the screening chose among; otherwise 1. Without
+/// the factor the shape that best matches the noise of an effect-free record would be named
+/// an effect more often than α allows.
 fn shapes_searched(
     kind: EffectKind,
     localisation: &Localisation,
     settings: &LocaliseSettings,
+    records: &[ExcitedRecord<'_>],
 ) -> usize {
     let from_angle = localisation
         .records
@@ -748,18 +754,47 @@ fn shapes_searched(
         .any(|c| c.angle_ripple.is_some());
     match kind {
         EffectKind::CoggingTorque if from_angle => settings.max_harmonic.max(1) as usize,
+        EffectKind::BrushDrop => brush_knee_scales(records).len().max(1),
         _ => 1,
     }
 }
+
+/// The current scales \[A\] a brush drop's knee is started from: each record's peak |I|,
+/// largest first, those within a factor [`BRUSH_SCALE_RATIO`] of a larger one left out. The
+/// knee is not fitted, and a knee far above the currents a record runs at makes the drop a
+/// resistance there (`Vb/I_knee`, which R already spans): a step at a few times the breakaway
+/// voltage runs hundreds of times below the high step's peak current.
+fn brush_knee_scales(records: &[ExcitedRecord<'_>]) -> Vec<f64> {
+    let mut peaks: Vec<f64> = records
+        .iter()
+        .map(|r| r.current.iter().fold(0.0_f64, |m, v| m.max(v.abs())))
+        .filter(|p| p.is_finite() && *p > 0.0)
+        .collect();
+    peaks.sort_by(|a, b| b.total_cmp(a));
+    let mut scales: Vec<f64> = Vec::new();
+    for p in peaks {
+        if scales
+            .last()
+            .is_none_or(|&last| last > BRUSH_SCALE_RATIO * p)
+        {
+            scales.push(p);
+        }
+    }
+    scales
+}
+
+/// Peak currents within this factor of each other give one brush-knee start.
+const BRUSH_SCALE_RATIO: f64 = 3.0;
 
 /// Stribeck speeds the screening starts from, as fractions of the slowest record's peak speed
 /// (the fit moves Ωs; the screening keeps the start whose signature explains most of the
 /// residual, so that a refit does not start a decade away from a dip near Ω = 0).
 const STRIBECK_START_FRACTIONS: [f64; 3] = [0.03, 0.1, 0.3];
 
-/// The starts of `kind` on `motor` the screening chooses among: [`candidate_start`], and for a
+/// The starts of `kind` on `motor` the screening chooses among: [`candidate_start`]; for a
 /// Stribeck friction also Stribeck speeds at [`STRIBECK_START_FRACTIONS`] of the slowest
-/// record's peak speed.
+/// record's peak speed; for a brush drop also the drop and knee of [`candidate_start`] scaled
+/// to each smaller current scale of [`brush_knee_scales`].
 fn candidate_starts(
     kind: EffectKind,
     motor: &MotorParams,
@@ -768,6 +803,17 @@ fn candidate_starts(
 ) -> Vec<Effect> {
     let first = candidate_start(kind, motor, records, localisation);
     let mut starts = vec![first];
+    if let Effect::BrushDrop(b) = first {
+        let scales = brush_knee_scales(records);
+        if let Some(&top) = scales.first() {
+            starts.extend(scales[1..].iter().map(|&i| {
+                Effect::BrushDrop(BrushDrop {
+                    drop_v: b.drop_v * i / top,
+                    knee_current_a: b.knee_current_a * i / top,
+                })
+            }));
+        }
+    }
     if let Effect::StribeckFriction(s) = first {
         let w_slowest = records
             .iter()
@@ -1001,6 +1047,7 @@ pub fn diagnose(
             &Effects::none(),
             settings.lm,
             settings.step_factor,
+            None,
         )
     };
     let predict_nominal = |records: &[ExcitedRecord<'_>], motor: &MotorParams| {
@@ -1329,6 +1376,10 @@ fn run_stage(
     let refit = |k: usize| -> Refit {
         let kind = kinds[k];
         let effects = base.effects.with(starts[k]);
+        // In the weights the base model was fitted and every candidate is judged in (the
+        // nominal fit's channel levels): a refit reweighted by its own residuals would
+        // minimise another cost than the one its likelihood-ratio test and held-out blocks
+        // measure, and could trade a channel the effect does not touch for one it does.
         let outcome = fit_output_error(
             base.train,
             &[],
@@ -1337,6 +1388,7 @@ fn run_stage(
             &effects,
             settings.lm,
             settings.step_factor,
+            Some(sigmas),
         )
         .map_err(|e| e.to_string())
         .and_then(|fit| match (&fit.refusal, fit.failure()) {
@@ -1463,7 +1515,7 @@ fn run_stage(
             extra_params: c.params.len(),
             testable: c.testable,
             train_statistic: *statistic,
-            searched: shapes_searched(kind, localisation, &settings.localise),
+            searched: shapes_searched(kind, localisation, &settings.localise, base.train),
             heldout_sse_before: &sse_before,
             heldout_sse_after: sse,
         })
@@ -1477,5 +1529,31 @@ fn run_stage(
         base: base.effects.list().iter().map(Effect::name).collect(),
         candidates,
         verdict,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_brush_knee_is_started_at_every_distinct_current_scale() {
+        let input = Input::step(1.0, 0.0).expect("a step");
+        let currents = [vec![0.0, 20.0, 10.0], vec![0.1, -0.2, 0.15], vec![0.3, 0.1]];
+        let records: Vec<ExcitedRecord<'_>> = currents
+            .iter()
+            .map(|current| ExcitedRecord {
+                input: &input,
+                dt: 1e-3,
+                current,
+                speed: None,
+                position: None,
+                exclude_current: None,
+                exclude_speed: None,
+            })
+            .collect();
+        // 20 A, then 0.3 A (0.2 A is within a factor 3 of it).
+        assert_eq!(brush_knee_scales(&records), vec![20.0, 0.3]);
+        assert_eq!(brush_knee_scales(&records[..1]), vec![20.0]);
     }
 }
