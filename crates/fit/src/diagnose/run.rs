@@ -1484,8 +1484,17 @@ fn run_stage(
     let mut passed: Vec<usize> = (0..kinds.len())
         .filter(|&k| screens[k].is_some_and(|s| s.testable && s.p_value < settings.screening_alpha))
         .collect();
+    // A shape picked as the best of `s` (a cogging torque's period count) also pays `2 ln s`,
+    // the Bonferroni factor on its p-value as a statistic of two degrees of freedom: the best
+    // of many period counts scores above a single one's χ² on noise alone, and would take a
+    // refit from the effect present.
     passed.sort_by(|a, b| {
-        let score = |k: usize| screens[k].map_or(f64::NEG_INFINITY, |s| s.penalised(penalty));
+        let score = |k: usize| {
+            let searched = shapes_searched(kinds[k], localisation, &settings.localise);
+            screens[k].map_or(f64::NEG_INFINITY, |s| {
+                s.penalised(penalty) - 2.0 * (searched as f64).ln()
+            })
+        };
         score(*b).total_cmp(&score(*a))
     });
     passed.truncate(settings.refits.max(1));
