@@ -580,7 +580,7 @@ const JUMP_DIFF_STEP: f64 = 0.05;
 
 /// Record `k`'s weighted residuals `(simulated − measured)/σ` for `motor` with `effects` on
 /// `input`, at the samples its masks keep, channel after channel: the rows
-/// [`output_error_sensitivity`] gives it.
+/// [`output_error_sensitivity`] gives it, each with its channel, its sample and its σ.
 fn record_rows(
     k: usize,
     record: &ExcitedRecord<'_>,
@@ -588,7 +588,7 @@ fn record_rows(
     base: &Base<'_>,
     sigmas: &[(usize, Channel, f64)],
     step_factor: f64,
-) -> Option<Vec<f64>> {
+) -> Option<Vec<(Channel, usize, f64, f64)>> {
     let r = ExcitedRecord { input, ..*record };
     let fitted = predict_with_step_factor(&[r], &base.motor, &base.effects, step_factor).ok()?;
     let mut rows = Vec::new();
@@ -603,11 +603,169 @@ fn record_rows(
         };
         for (j, &i) in ch.samples.iter().enumerate() {
             if !mask.is_some_and(|m| m.get(i).copied().unwrap_or(false)) {
-                rows.push((ch.model[j] - ch.measured[j]) / sigma);
+                rows.push((ch.channel, i, sigma, (ch.model[j] - ch.measured[j]) / sigma));
             }
         }
     }
     Some(rows)
+}
+
+/// The values of [`record_rows`] alone.
+fn row_values(rows: &[(Channel, usize, f64, f64)]) -> Vec<f64> {
+    rows.iter().map(|r| r.3).collect()
+}
+
+/// Cogging period counts screened with their full signature at most, beside the angle
+/// search's: the best by [`cogging_prefilter`].
+const COGGING_SCREENED: usize = 4;
+
+/// The cogging period counts whose full signature the screening computes on top of `base`:
+/// the angle search's ([`ripple_periods`]) and the best [`COGGING_SCREENED`] others by
+/// [`cogging_prefilter`]; every N of [`cogging_counts`] when that cannot be built.
+fn cogging_screened(
+    base: &Base<'_>,
+    sigmas: &[(usize, Channel, f64)],
+    projection: &BaseProjection,
+    localisation: &Localisation,
+    settings: &DiagnoseSettings,
+) -> Vec<u32> {
+    let first = ripple_periods(localisation);
+    let max_harmonic = settings.localise.max_harmonic;
+    match cogging_prefilter(base, sigmas, projection, max_harmonic, settings.step_factor) {
+        Some(ranked) => std::iter::once(first)
+            .chain(
+                ranked
+                    .into_iter()
+                    .filter(|&n| n != first)
+                    .take(COGGING_SCREENED),
+            )
+            .collect(),
+        None => cogging_counts(first, max_harmonic),
+    }
+}
+
+/// Sub-steps of the linear response per sample at most, so that the probe `sin Nθ` turns at
+/// most half a radian per sub-step where it can.
+const PROBE_SUBSTEPS: usize = 16;
+
+/// The period counts N = 1..=`max_harmonic` ranked by the score of an approximate cogging
+/// signature (best first), or `None` when it cannot be built. The signature of a small load
+/// torque `A sin(Nθ + φ)` is the response of the base motor linearised along its own
+/// trajectory — `L δİ = −R δI − k δΩ`, `J δΩ̇ = k δI − f δΩ − u`, `δθ̇ = δΩ` (SPEC (2)) — to
+/// the probes `u = sin Nθ(t)` and `u = cos Nθ(t)` while the rotor turns (held at rest while
+/// it sticks), advanced exactly over each sub-step (a matrix exponential) and read where the
+/// records' channels are (the current, the speed, or the central difference of the angle for
+/// an encoder). One such response costs a fraction of a simulation, so every N is looked at;
+/// the best few are screened with the full signature ([`candidate_starts`]). The base
+/// model's other effects are left out of the linearisation: it ranks N, it does not test.
+fn cogging_prefilter(
+    base: &Base<'_>,
+    sigmas: &[(usize, Channel, f64)],
+    projection: &BaseProjection,
+    max_harmonic: u32,
+    step_factor: f64,
+) -> Option<Vec<u32>> {
+    use nalgebra::{Matrix3, Matrix4, Vector3};
+    let m = &base.motor;
+    let (r, l, k, f, j) = (m.r_ohm, m.l_henry, m.k_nm_per_a, m.f_nms_per_rad, m.j_kgm2);
+    // Each training record's rows and the base trajectory they are read along.
+    let mut layouts = Vec::with_capacity(base.train.len());
+    for (idx, rec) in base.train.iter().enumerate() {
+        let rows = record_rows(idx, rec, rec.input, base, sigmas, step_factor)?;
+        let n = rec.current.len();
+        let trace = motor_model::Simulator::new(*m, base.effects, rec.input.clone())
+            .and_then(|s| s.with_step_factor(step_factor))
+            .and_then(|s| s.run((n as f64 - 0.5) * rec.dt, 1.0 / rec.dt))
+            .ok()?;
+        if trace.t.len() != n {
+            return None;
+        }
+        layouts.push((rows, trace, rec.dt));
+    }
+    let total: usize = layouts.iter().map(|(rows, _, _)| rows.len()).sum();
+    // The propagator of one sub-step of each record: Φ and the input column Γ, from the
+    // exponential of the augmented matrix [[A, B], [0, 0]] h.
+    let propagator = |h: f64| -> (Matrix3<f64>, Vector3<f64>) {
+        let a = Matrix4::new(
+            -r / l,
+            -k / l,
+            0.0,
+            0.0,
+            k / j,
+            -f / j,
+            0.0,
+            -1.0 / j,
+            0.0,
+            1.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+        ) * h;
+        let e = a.exp();
+        (
+            e.fixed_view::<3, 3>(0, 0).into_owned(),
+            e.fixed_view::<3, 1>(0, 3).into_owned(),
+        )
+    };
+    let scored: Vec<(u32, f64)> = (1..=max_harmonic.max(1))
+        .into_par_iter()
+        .filter_map(|order| {
+            let nf = f64::from(order);
+            let mut columns = DMatrix::zeros(total, 2);
+            let mut at = 0;
+            for (rows, trace, dt) in &layouts {
+                let n = trace.t.len();
+                let turn = trace
+                    .position
+                    .windows(2)
+                    .map(|w| (w[1] - w[0]).abs())
+                    .fold(0.0_f64, f64::max);
+                let sub = ((nf * turn / 0.5).ceil() as usize).clamp(1, PROBE_SUBSTEPS);
+                let h = dt / sub as f64;
+                let (phi, gamma) = propagator(h);
+                for (c, shift) in [(0usize, 0.0), (1, std::f64::consts::FRAC_PI_2)] {
+                    let mut x = Vector3::zeros();
+                    let mut states = Vec::with_capacity(n);
+                    states.push(x);
+                    for i in 1..n {
+                        if trace.stuck[i] && trace.stuck[i - 1] {
+                            x = Vector3::new(x[0], 0.0, 0.0);
+                        } else {
+                            for q in 0..sub {
+                                let w = (q as f64 + 0.5) / sub as f64;
+                                let th = trace.position[i - 1]
+                                    + w * (trace.position[i] - trace.position[i - 1]);
+                                x = phi * x + gamma * (nf * th + shift).sin();
+                            }
+                        }
+                        if !x.iter().all(|v| v.is_finite()) {
+                            return None;
+                        }
+                        states.push(x);
+                    }
+                    let angle: Vec<f64> = states.iter().map(|x| x[2]).collect();
+                    let encoder = motor_model::central_difference(&trace.t, &angle);
+                    for (row, (channel, i, sigma, _)) in rows.iter().enumerate() {
+                        let value = match channel {
+                            Channel::Current => states[*i][0],
+                            Channel::Speed => states[*i][1],
+                            Channel::EncoderSpeed => encoder[*i],
+                        };
+                        columns[(at + row, c)] = value / sigma;
+                    }
+                }
+                at += rows.len();
+            }
+            let score = projection.score(&columns);
+            (score.testable && score.statistic.is_finite()).then_some((order, score.statistic))
+        })
+        .collect();
+    let mut scored = scored;
+    scored.sort_by(|a, b| b.1.total_cmp(&a.1));
+    Some(scored.into_iter().map(|(order, _)| order).collect())
 }
 
 /// The base Jacobian `jacobian` (rows of `residuals`, the training records of `base`) with a
@@ -628,7 +786,7 @@ fn with_jump_columns(
     let mut rows: Vec<Vec<f64>> = Vec::with_capacity(base.train.len());
     for (k, r) in base.train.iter().enumerate() {
         match record_rows(k, r, r.input, base, sigmas, step_factor) {
-            Some(v) => rows.push(v),
+            Some(v) => rows.push(row_values(&v)),
             None => return jacobian,
         }
     }
@@ -661,6 +819,7 @@ fn with_jump_columns(
             let Some(moved) = Input::piecewise(&shifted)
                 .ok()
                 .and_then(|input| record_rows(k, r, &input, base, sigmas, step_factor))
+                .map(|v| row_values(&v))
             else {
                 continue;
             };
@@ -720,14 +879,7 @@ fn channel_scales(nominal: &FullFit, fitted: &[FittedChannel]) -> Vec<(usize, Ch
         {
             continue;
         }
-        let n = ch.measured.len().min(ch.model.len());
-        let sse: f64 = ch
-            .measured
-            .iter()
-            .zip(&ch.model)
-            .map(|(y, m)| (y - m).powi(2))
-            .sum();
-        let rms = (sse / n.max(1) as f64).sqrt();
+        let rms = residual_rms(ch);
         if rms.is_finite() && rms > 0.0 {
             sigmas.push((ch.record, ch.channel, rms));
         }
@@ -735,28 +887,64 @@ fn channel_scales(nominal: &FullFit, fitted: &[FittedChannel]) -> Vec<(usize, Ch
     sigmas
 }
 
-/// How many alternatives `kind`'s fixed shape was picked from by looking at the residual: for
-/// a cogging torque whose period count comes from the angle search, the counts that search
-/// tried ([`LocaliseSettings::max_harmonic`]); for a brush drop, whose knee current is not
-/// fitted, the knees of [`candidate_starts`] the screening chose among; otherwise 1. Without
-/// the factor the shape that best matches the noise of an effect-free record would be named
-/// an effect more often than α allows.
+/// The RMS of a fitted channel's residual, measured − model (its unit).
+fn residual_rms(ch: &FittedChannel) -> f64 {
+    let n = ch.measured.len().min(ch.model.len());
+    let sse: f64 = ch
+        .measured
+        .iter()
+        .zip(&ch.model)
+        .map(|(y, m)| (y - m).powi(2))
+        .sum();
+    (sse / n.max(1) as f64).sqrt()
+}
+
+/// How many alternatives the screening picked `kind`'s fixed shape from by looking at the
+/// residual: for a cogging torque, the period counts it screened ([`cogging_counts`]); for a
+/// brush drop, whose knee current is not fitted, the knees of [`candidate_starts`] the
+/// screening chose among; otherwise 1. Without the factor the shape that best matches the
+/// noise of an effect-free record would be named an effect more often than α allows.
 fn shapes_searched(
     kind: EffectKind,
     localisation: &Localisation,
     settings: &LocaliseSettings,
     records: &[ExcitedRecord<'_>],
 ) -> usize {
-    let from_angle = localisation
-        .records
-        .iter()
-        .flat_map(|r| &r.channels)
-        .any(|c| c.angle_ripple.is_some());
     match kind {
-        EffectKind::CoggingTorque if from_angle => settings.max_harmonic.max(1) as usize,
+        EffectKind::CoggingTorque => {
+            cogging_counts(ripple_periods(localisation), settings.max_harmonic).len()
+        }
         EffectKind::BrushDrop => brush_knee_scales(records).len().max(1),
         _ => 1,
     }
+}
+
+/// The cogging period count the localisation's angle search points to: that of the channel
+/// whose angle ripple is most significant, 6 when no channel was searched.
+fn ripple_periods(localisation: &Localisation) -> u32 {
+    localisation
+        .records
+        .iter()
+        .flat_map(|r| &r.channels)
+        .filter_map(|c| c.angle_ripple.as_ref())
+        .min_by(|a, b| a.p_value.total_cmp(&b.p_value))
+        .map_or(6, |a| a.periods_per_rev.max(1))
+}
+
+/// The cogging period counts N \[periods per revolution\] the screening looks at: `first` (the
+/// angle search's, [`ripple_periods`]), then every other N from 1 to `max_harmonic`. The
+/// angle search alone picks N from the residual against the angle on every record, the
+/// validation records that do not excite the cogging among them, with a regression of
+/// constant amplitude, while the ripple a cogging torque leaves falls as `1/(J N Ω)` with
+/// speed and shows mostly where the motor turns slowly: a start at its N is refitted at the
+/// wrong period count and falls to zero, and another effect acting at low speed (a Stribeck
+/// friction) takes the gap. The screening ranks every N by the cogging's signature on the
+/// training records ([`cogging_prefilter`]) and screens the best in full
+/// ([`cogging_screened`]).
+fn cogging_counts(first: u32, max_harmonic: u32) -> Vec<u32> {
+    let mut counts = vec![first.max(1)];
+    counts.extend((1..=max_harmonic.max(1)).filter(|&n| n != first.max(1)));
+    counts
 }
 
 /// The current scales \[A\] a brush drop's knee is started from: each record's peak |I|,
@@ -794,14 +982,27 @@ const STRIBECK_START_FRACTIONS: [f64; 3] = [0.03, 0.1, 0.3];
 /// The starts of `kind` on `motor` the screening chooses among: [`candidate_start`]; for a
 /// Stribeck friction also Stribeck speeds at [`STRIBECK_START_FRACTIONS`] of the slowest
 /// record's peak speed; for a brush drop also the drop and knee of [`candidate_start`] scaled
-/// to each smaller current scale of [`brush_knee_scales`].
+/// to each smaller current scale of [`brush_knee_scales`]; for a cogging torque the period
+/// counts `cogging` (the angle search's first; none given: that one alone).
 fn candidate_starts(
     kind: EffectKind,
     motor: &MotorParams,
     records: &[ExcitedRecord<'_>],
     localisation: &Localisation,
+    cogging: &[u32],
 ) -> Vec<Effect> {
     let first = candidate_start(kind, motor, records, localisation);
+    if let (Effect::CoggingTorque(c), false) = (first, cogging.is_empty()) {
+        return cogging
+            .iter()
+            .map(|&n| {
+                Effect::CoggingTorque(CoggingTorque {
+                    periods_per_rev: n,
+                    ..c
+                })
+            })
+            .collect();
+    }
     let mut starts = vec![first];
     if let Effect::BrushDrop(b) = first {
         let scales = brush_knee_scales(records);
@@ -877,20 +1078,11 @@ fn candidate_start(
             static_torque_nm: 1.5 * motor.ts_nm,
             stribeck_speed_rad_s: 0.05 * w_max,
         }),
-        EffectKind::CoggingTorque => {
-            let n = localisation
-                .records
-                .iter()
-                .flat_map(|r| &r.channels)
-                .filter_map(|c| c.angle_ripple.as_ref())
-                .min_by(|a, b| a.p_value.total_cmp(&b.p_value))
-                .map_or(6, |a| a.periods_per_rev.max(1));
-            Effect::CoggingTorque(CoggingTorque {
-                amplitude_nm: 0.1 * motor.ts_nm.max(1e-3 * motor.k_nm_per_a * i_max),
-                periods_per_rev: n,
-                phase_rad: 0.3,
-            })
-        }
+        EffectKind::CoggingTorque => Effect::CoggingTorque(CoggingTorque {
+            amplitude_nm: 0.1 * motor.ts_nm.max(1e-3 * motor.k_nm_per_a * i_max),
+            periods_per_rev: ripple_periods(localisation),
+            phase_rad: 0.3,
+        }),
         // A tenth of a sample period: small beside anything a record resolves, so that the
         // screening's signature is the lag's at zero size (the simulator advances the filter
         // exactly, so no time constant of it bounds the step).
@@ -1251,12 +1443,17 @@ fn screen_stage(
             })
             .collect();
     };
+    let cogging = if kinds.contains(&EffectKind::CoggingTorque) {
+        cogging_screened(base, sigmas, &projection, localisation, settings)
+    } else {
+        Vec::new()
+    };
     kinds
         .iter()
         .map(|&kind| {
-            let starts = candidate_starts(kind, &base.motor, base.train, localisation);
+            let starts = candidate_starts(kind, &base.motor, base.train, localisation, &cogging);
             let scored: Vec<(Option<Screening>, Effect)> = starts
-                .iter()
+                .par_iter()
                 .map(|&effect| {
                     let effects = base.effects.with(effect);
                     let score = output_error_sensitivity(
@@ -1277,7 +1474,7 @@ fn screen_stage(
                 x.filter(|s| s.testable)
                     .map_or(f64::NEG_INFINITY, |s| s.statistic)
             };
-            scored
+            let (score, start) = scored
                 .iter()
                 .copied()
                 .reduce(|best, next| {
@@ -1287,7 +1484,16 @@ fn screen_stage(
                         best
                     }
                 })
-                .unwrap_or((None, starts[0]))
+                .unwrap_or((None, starts[0]));
+            // A fixed shape picked as the best of several (a cogging torque's period count)
+            // has its screening p-value multiplied by their number (Bonferroni), so that the
+            // best of the noise does not take a refit from an effect present.
+            let searched = shapes_searched(kind, localisation, &settings.localise, base.train);
+            let score = score.map(|s| Screening {
+                p_value: (s.p_value * searched as f64).min(1.0),
+                ..s
+            });
+            (score, start)
         })
         .collect()
 }
@@ -1330,8 +1536,17 @@ fn run_stage(
     let mut passed: Vec<usize> = (0..kinds.len())
         .filter(|&k| screens[k].is_some_and(|s| s.testable && s.p_value < settings.screening_alpha))
         .collect();
+    // A shape picked as the best of `s` (a cogging torque's period count) also pays `2 ln s`,
+    // the Bonferroni factor on its p-value as a statistic of two degrees of freedom: the best
+    // of many period counts scores above a single one's χ² on noise alone, and would take a
+    // refit from the effect present.
     passed.sort_by(|a, b| {
-        let score = |k: usize| screens[k].map_or(f64::NEG_INFINITY, |s| s.penalised(penalty));
+        let score = |k: usize| {
+            let searched = shapes_searched(kinds[k], localisation, &settings.localise, base.train);
+            screens[k].map_or(f64::NEG_INFINITY, |s| {
+                s.penalised(penalty) - 2.0 * (searched as f64).ln()
+            })
+        };
         score(*b).total_cmp(&score(*a))
     });
     passed.truncate(settings.refits.max(1));
@@ -1535,6 +1750,8 @@ fn run_stage(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::output_error::voltage_input;
+    use motor_model::{MeasurementModel, Record};
 
     #[test]
     fn a_brush_knee_is_started_at_every_distinct_current_scale() {
@@ -1555,5 +1772,78 @@ mod tests {
         // 20 A, then 0.3 A (0.2 A is within a factor 3 of it).
         assert_eq!(brush_knee_scales(&records), vec![20.0, 0.3]);
         assert_eq!(brush_knee_scales(&records[..1]), vec![20.0]);
+    }
+
+    /// The servo of the diagnosis examples (R 2 Ω, L 2 mH, k 0.05, f 4e-4, J 2e-5, Ts 4 mN·m)
+    /// under 12 V, 3 V and 0.6 V steps of 1 s at 5 kHz through the paper's logger, with
+    /// `effects`.
+    fn servo_records(effects: Effects) -> (MotorParams, Vec<(Input, Record)>) {
+        let motor = MotorParams::new(2.0, 2e-3, 0.05, 4e-4, 2e-5, 4e-3).unwrap();
+        let records = [12.0, 3.0, 0.6]
+            .iter()
+            .enumerate()
+            .map(|(k, &volts)| {
+                let input = Input::step(volts, 0.05).unwrap();
+                let trace = motor_model::simulate(&motor, effects, &input, 1.0, 5e3).unwrap();
+                let record = MeasurementModel::paper_logger(&trace, 30 + k as u64)
+                    .apply(&trace)
+                    .unwrap();
+                (voltage_input(&record.t, &record.voltage).unwrap(), record)
+            })
+            .collect();
+        (motor, records)
+    }
+
+    #[test]
+    fn the_cogging_prefilter_ranks_the_period_count_present_among_those_screened() {
+        // A cogging torque of 20 periods per revolution at half the Coulomb torque, the
+        // nominal motor as the base: its signature at N = 20 must be among the few the
+        // screening refits in full.
+        for n in [7u32, 20] {
+            let cogging = Effect::CoggingTorque(CoggingTorque {
+                amplitude_nm: 2e-3,
+                periods_per_rev: n,
+                phase_rad: 0.4,
+            });
+            let (motor, records) = servo_records(Effects::none().with(cogging));
+            let excited: Vec<ExcitedRecord<'_>> = records
+                .iter()
+                .map(|(input, r)| ExcitedRecord {
+                    input,
+                    dt: 2e-4,
+                    current: &r.current,
+                    speed: None,
+                    position: r.position.as_deref(),
+                    exclude_current: None,
+                    exclude_speed: None,
+                })
+                .collect();
+            let fitted = predict_with_step_factor(&excited, &motor, &Effects::none(), 8.0).unwrap();
+            let sigmas: Vec<(usize, Channel, f64)> = fitted
+                .iter()
+                .map(|ch| (ch.record, ch.channel, residual_rms(ch)))
+                .collect();
+            let base = Base {
+                motor,
+                effects: Effects::none(),
+                fitted,
+                train: &excited,
+                all: &excited,
+            };
+            let lin =
+                output_error_sensitivity(&excited, &motor, &Effects::none(), &sigmas, None, 8.0)
+                    .unwrap();
+            let projection = BaseProjection::new(&lin.residuals, &lin.jacobian, &lin.series)
+                .expect("a linearisation");
+            let ranked = cogging_prefilter(&base, &sigmas, &projection, 64, 8.0)
+                .expect("a ranking of the period counts");
+            assert_eq!(ranked.len(), 64);
+            let at = ranked.iter().position(|&m| m == n);
+            assert!(
+                at.is_some_and(|at| at < COGGING_SCREENED),
+                "N = {n} ranked {at:?}: {:?}",
+                &ranked[..8]
+            );
+        }
     }
 }
