@@ -18,15 +18,9 @@
 //!   one-sided paired t-test over the blocks is reported.
 //!
 //! Candidates are ranked by their held-out improvement `Σ d_b` less a penalty of 2 per extra
-//! parameter (Akaike's, in the same noise-variance units). A significant candidate is
-//! *ambiguous* with the top significant one when the paired test of their held-out block
-//! errors does not prefer the top one at α. Of the top one and those ambiguous with it, the
-//! verdict is the one the training data favour most: the largest training likelihood-ratio
-//! statistic less the same penalty per parameter and less `2 ln s` for a shape picked among
-//! `s` (the held-out blocks, a quarter of the samples, cannot tell them apart; the training
-//! samples, three times as many, often can: a cogging torque and a Stribeck friction both move
-//! the breakaway of a slow step, which dominates its held-out error, and only the cogging also
-//! explains the ripple locked to the angle after it). The others stay ambiguous with it.
+//! parameter (Akaike's, in the same noise-variance units). The top significant candidate is the
+//! verdict; the next significant one is *ambiguous* with it when the paired test of their
+//! held-out block errors does not prefer the top one at α.
 
 use serde::Serialize;
 
@@ -129,19 +123,6 @@ fn paired_p(a: &[f64], b: &[f64]) -> f64 {
     }
 }
 
-/// The training likelihood-ratio statistic of `c` less `penalty` per extra parameter and less
-/// `2 ln s` for a fixed shape picked as the best of `s` ([`CandidateScore::searched`]: the
-/// Bonferroni factor on its p-value, as a statistic of two degrees of freedom): how much the
-/// training data favour it, in the units of [`Ranked::score`]; −∞ when not computable.
-fn training_evidence(c: &CandidateScore<'_>, penalty: f64) -> f64 {
-    match c.train_statistic {
-        Some(x) if c.testable && x.is_finite() => {
-            x - penalty * c.extra_params as f64 - 2.0 * (c.searched.max(1) as f64).ln()
-        }
-        _ => f64::NEG_INFINITY,
-    }
-}
-
 /// Ranks `candidates` and names the verdict (module docs).
 pub fn rank_candidates(candidates: &[CandidateScore<'_>], settings: &VerdictSettings) -> Verdict {
     let m = candidates.iter().filter(|c| c.testable).count().max(1);
@@ -186,51 +167,22 @@ pub fn rank_candidates(candidates: &[CandidateScore<'_>], settings: &VerdictSett
         })
         .collect();
     ranked.sort_by(|a, b| b.0.score.total_cmp(&a.0.score));
-    let significant: Vec<(usize, usize)> = ranked
-        .iter()
-        .enumerate()
-        .filter(|(_, r)| r.0.significant)
-        .map(|(at, r)| (at, r.1))
-        .collect();
-    // The top candidate and those it does not beat on the held-out blocks.
-    let tied: Vec<(usize, usize)> = match significant.first() {
-        Some(&(_, top)) => significant
+    let significant: Vec<&(Ranked, usize)> = ranked.iter().filter(|r| r.0.significant).collect();
+    let verdict = significant.first().map(|r| r.0.name.clone());
+    let ambiguous_with = match significant.first() {
+        Some((_, top)) => significant[1..]
             .iter()
-            .copied()
-            .filter(|&(_, k)| {
-                k == top
-                    || paired_p(
-                        candidates[k].heldout_sse_after,
-                        candidates[top].heldout_sse_after,
-                    ) >= settings.alpha
+            .filter(|(_, k)| {
+                // Does the top candidate beat this one on the held-out blocks?
+                paired_p(
+                    candidates[*k].heldout_sse_after,
+                    candidates[*top].heldout_sse_after,
+                ) >= settings.alpha
             })
+            .map(|r| r.0.name.clone())
             .collect(),
         None => Vec::new(),
     };
-    // Of those, the one the training data favour most (module docs) is the verdict, ranked
-    // first.
-    let evidence = |k: usize| training_evidence(&candidates[k], settings.penalty_per_param);
-    let chosen = tied
-        .iter()
-        .copied()
-        .reduce(|best, next| {
-            if evidence(next.1) > evidence(best.1) {
-                next
-            } else {
-                best
-            }
-        })
-        .map(|(at, _)| at);
-    if let Some(at) = chosen {
-        let row = ranked.remove(at);
-        ranked.insert(0, row);
-    }
-    let verdict = chosen.map(|_| ranked[0].0.name.clone());
-    let ambiguous_with = tied
-        .iter()
-        .filter(|(_, k)| Some(*k) != chosen.map(|_| ranked[0].1))
-        .map(|(_, k)| candidates[*k].name.to_string())
-        .collect();
     Verdict {
         ranked: ranked.into_iter().map(|(r, _)| r).collect(),
         verdict,
@@ -301,33 +253,6 @@ mod tests {
         let v = rank_candidates(&cands, &VerdictSettings::default());
         assert!(v.verdict.is_some());
         assert_eq!(v.ambiguous_with.len(), 1, "{v:?}");
-    }
-
-    #[test]
-    fn of_two_the_held_out_blocks_cannot_tell_apart_the_training_data_choose() {
-        let mut rng = NoiseRng::new(5);
-        let before = blocks(&mut rng, 0.5, 20);
-        let after = blocks(&mut rng, 0.0, 20);
-        // The second does one noise variance worse on one held-out block, and far better on
-        // the training data.
-        let mut close = after.clone();
-        close[3] += 1.0;
-        let cands = [
-            candidate("first", 300.0, &before, &after),
-            candidate("second", 1000.0, &before, &close),
-        ];
-        let v = rank_candidates(&cands, &VerdictSettings::default());
-        assert_eq!(v.verdict.as_deref(), Some("second"), "{v:?}");
-        assert_eq!(v.ranked[0].name, "second");
-        assert_eq!(v.ambiguous_with, vec!["first".to_string()]);
-        // A shape picked among many pays for the search: 2 ln 64 ≈ 8.3 takes a lead of 5.
-        let picked = CandidateScore {
-            searched: 64,
-            ..candidate("second", 305.0, &before, &close)
-        };
-        let v = rank_candidates(&[cands[0], picked], &VerdictSettings::default());
-        assert_eq!(v.verdict.as_deref(), Some("first"), "{v:?}");
-        assert_eq!(v.ambiguous_with, vec!["second".to_string()]);
     }
 
     #[test]
