@@ -108,6 +108,21 @@ pub struct FittedChannel {
     pub model: Vec<f64>,
 }
 
+impl FittedChannel {
+    /// The RMS of the residual, measured − model, over the samples both hold (the channel's
+    /// unit: A, rad/s); 0 for an empty channel.
+    pub fn residual_rms(&self) -> f64 {
+        let n = self.measured.len().min(self.model.len());
+        let sse: f64 = self
+            .measured
+            .iter()
+            .zip(&self.model)
+            .map(|(y, m)| (y - m).powi(2))
+            .sum();
+        (sse / n.max(1) as f64).sqrt()
+    }
+}
+
 /// Result of the full-model identification.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FullFit {

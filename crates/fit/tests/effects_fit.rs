@@ -75,12 +75,7 @@ fn excited<'a>(
 fn nrmse(fit: &FullFit) -> f64 {
     let (sum, n) = fit.fitted.iter().fold((0.0, 0.0), |(s, n), ch| {
         let mean = ch.measured.iter().sum::<f64>() / ch.measured.len() as f64;
-        let sse: f64 = ch
-            .measured
-            .iter()
-            .zip(&ch.model)
-            .map(|(y, m)| (y - m).powi(2))
-            .sum();
+        let sse = ch.residual_rms().powi(2) * ch.measured.len() as f64;
         let sst: f64 = ch.measured.iter().map(|y| (y - mean).powi(2)).sum();
         let w = ch.measured.len() as f64;
         (s + w * (sse / sst).sqrt(), n + w)

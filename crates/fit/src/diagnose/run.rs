@@ -879,24 +879,12 @@ fn channel_scales(nominal: &FullFit, fitted: &[FittedChannel]) -> Vec<(usize, Ch
         {
             continue;
         }
-        let rms = residual_rms(ch);
+        let rms = ch.residual_rms();
         if rms.is_finite() && rms > 0.0 {
             sigmas.push((ch.record, ch.channel, rms));
         }
     }
     sigmas
-}
-
-/// The RMS of a fitted channel's residual, measured − model (its unit).
-fn residual_rms(ch: &FittedChannel) -> f64 {
-    let n = ch.measured.len().min(ch.model.len());
-    let sse: f64 = ch
-        .measured
-        .iter()
-        .zip(&ch.model)
-        .map(|(y, m)| (y - m).powi(2))
-        .sum();
-    (sse / n.max(1) as f64).sqrt()
 }
 
 /// How many alternatives the screening picked `kind`'s fixed shape from by looking at the
@@ -1821,7 +1809,7 @@ mod tests {
             let fitted = predict_with_step_factor(&excited, &motor, &Effects::none(), 8.0).unwrap();
             let sigmas: Vec<(usize, Channel, f64)> = fitted
                 .iter()
-                .map(|ch| (ch.record, ch.channel, residual_rms(ch)))
+                .map(|ch| (ch.record, ch.channel, ch.residual_rms()))
                 .collect();
             let base = Base {
                 motor,
