@@ -1521,6 +1521,10 @@ fn run_stage(
     // The candidates refitted: the best testable ones by their penalised score whose score
     // passes the screening level, and any the screening could not score.
     let penalty = settings.verdict.penalty_per_param;
+    let searched: Vec<usize> = kinds
+        .iter()
+        .map(|&kind| shapes_searched(kind, localisation, &settings.localise, base.train))
+        .collect();
     let mut passed: Vec<usize> = (0..kinds.len())
         .filter(|&k| screens[k].is_some_and(|s| s.testable && s.p_value < settings.screening_alpha))
         .collect();
@@ -1530,9 +1534,8 @@ fn run_stage(
     // refit from the effect present.
     passed.sort_by(|a, b| {
         let score = |k: usize| {
-            let searched = shapes_searched(kinds[k], localisation, &settings.localise, base.train);
             screens[k].map_or(f64::NEG_INFINITY, |s| {
-                s.penalised(penalty) - 2.0 * (searched as f64).ln()
+                s.penalised(penalty) - 2.0 * (searched[k] as f64).ln()
             })
         };
         score(*b).total_cmp(&score(*a))
@@ -1712,13 +1715,13 @@ fn run_stage(
         .collect();
     let scores: Vec<CandidateScore<'_>> = results
         .iter()
-        .zip(kinds)
-        .map(|((c, sse, statistic), &kind)| CandidateScore {
+        .zip(&searched)
+        .map(|((c, sse, statistic), &searched)| CandidateScore {
             name: c.name,
             extra_params: c.params.len(),
             testable: c.testable,
             train_statistic: *statistic,
-            searched: shapes_searched(kind, localisation, &settings.localise, base.train),
+            searched,
             heldout_sse_before: &sse_before,
             heldout_sse_after: sse,
         })
