@@ -148,6 +148,18 @@ impl Parameters {
             .zip(&theta[MOTOR..self.named()])
             .map(|((_, spec), &t)| spec.from_unconstrained(t, &motor))
             .collect();
+        // A coordinate whose value rounds onto a boundary its transform cannot reach (a ratio
+        // of exactly 1 from a logit past 37, a size of 0 from ln v below −745) is not
+        // representable: it could not be encoded again to predict or linearise the fitted
+        // model, so a fit must not step there.
+        if self
+            .slots
+            .iter()
+            .zip(&values)
+            .any(|((_, spec), &v)| spec.to_unconstrained(v, &motor).is_err())
+        {
+            return None;
+        }
         let effects = self.effects.with_fitted_values(&values).ok()?;
         effects.validate(&motor).ok()?;
         Some((motor, effects))

@@ -967,10 +967,18 @@ const BRUSH_SCALE_RATIO: f64 = 3.0;
 /// residual, so that a refit does not start a decade away from a dip near Ω = 0).
 const STRIBECK_START_FRACTIONS: [f64; 3] = [0.03, 0.1, 0.3];
 
+/// Saturation currents the screening also starts from, as fractions of the records' peak
+/// current (beside [`candidate_start`]'s twice that peak): far above the currents a record
+/// runs at, the fall of L is `∝ I²` whatever its size, while a saturation current within them
+/// gives an inductance that falls near `I = 0` and then holds — a shape the `I²` signature
+/// does not span, so that the screening would miss it and a refit start a decade away.
+const SATURATION_START_FRACTIONS: [f64; 3] = [0.1, 0.3, 1.0];
+
 /// The starts of `kind` on `motor` the screening chooses among: [`candidate_start`]; for a
 /// Stribeck friction also Stribeck speeds at [`STRIBECK_START_FRACTIONS`] of the slowest
 /// record's peak speed; for a brush drop also the drop and knee of [`candidate_start`] scaled
-/// to each smaller current scale of [`brush_knee_scales`]; for a cogging torque the period
+/// to each smaller current scale of [`brush_knee_scales`]; for an inductance saturation also
+/// saturation currents at [`SATURATION_START_FRACTIONS`] of the peak; for a cogging torque the period
 /// counts `cogging` (the angle search's first; none given: that one alone).
 fn candidate_starts(
     kind: EffectKind,
@@ -1017,8 +1025,20 @@ fn candidate_starts(
             }));
         }
     }
+    if let Effect::InductanceSaturation(sat) = first {
+        let i_max = sat.saturation_current_a / SATURATION_START_OVER_PEAK;
+        starts.extend(SATURATION_START_FRACTIONS.iter().map(|&x| {
+            Effect::InductanceSaturation(InductanceSaturation {
+                saturation_current_a: x * i_max,
+                ..sat
+            })
+        }));
+    }
     starts
 }
+
+/// [`candidate_start`]'s saturation current over the records' peak current.
+const SATURATION_START_OVER_PEAK: f64 = 2.0;
 
 /// The running trapezoidal integral of `speed` \[rad/s\] sampled every `dt` \[s\]: the angle
 /// \[rad\] turned since the first sample.
@@ -1101,8 +1121,8 @@ fn candidate_start(
             knee_current_a: 0.05 * i_max,
         }),
         EffectKind::InductanceSaturation => Effect::InductanceSaturation(InductanceSaturation {
-            saturation_current_a: 2.0 * i_max,
-            min_ratio: 0.5,
+            saturation_current_a: SATURATION_START_OVER_PEAK * i_max,
+            min_ratio: 0.9,
         }),
     }
 }
