@@ -943,7 +943,7 @@ fn cogging_counts(first: u32, max_harmonic: u32) -> Vec<u32> {
 fn brush_knee_scales(records: &[ExcitedRecord<'_>]) -> Vec<f64> {
     let mut peaks: Vec<f64> = records
         .iter()
-        .map(|r| r.current.iter().fold(0.0_f64, |m, v| m.max(v.abs())))
+        .map(peak_current)
         .filter(|p| p.is_finite() && *p > 0.0)
         .collect();
     peaks.sort_by(|a, b| b.total_cmp(a));
@@ -1026,7 +1026,7 @@ fn candidate_starts(
         }
     }
     if let Effect::InductanceSaturation(sat) = first {
-        let i_max = sat.saturation_current_a / SATURATION_START_OVER_PEAK;
+        let i_max = records_peak_current(records);
         starts.extend(SATURATION_START_FRACTIONS.iter().map(|&x| {
             Effect::InductanceSaturation(InductanceSaturation {
                 saturation_current_a: x * i_max,
@@ -1036,9 +1036,6 @@ fn candidate_starts(
     }
     starts
 }
-
-/// [`candidate_start`]'s saturation current over the records' peak current.
-const SATURATION_START_OVER_PEAK: f64 = 2.0;
 
 /// The running trapezoidal integral of `speed` \[rad/s\] sampled every `dt` \[s\]: the angle
 /// \[rad\] turned since the first sample.
@@ -1052,6 +1049,21 @@ fn integrated_angle(speed: &[f64], dt: f64) -> Vec<f64> {
         out.push(theta);
     }
     out
+}
+
+/// A record's peak |I| \[A\].
+fn peak_current(r: &ExcitedRecord<'_>) -> f64 {
+    r.current.iter().fold(0.0_f64, |m, v| m.max(v.abs()))
+}
+
+/// The records' peak |I| \[A\], at least 1 µA: the current scale the starts of
+/// [`candidate_start`] and [`candidate_starts`] are taken from.
+fn records_peak_current(records: &[ExcitedRecord<'_>]) -> f64 {
+    records
+        .iter()
+        .map(peak_current)
+        .fold(0.0_f64, f64::max)
+        .max(1e-6)
 }
 
 /// A record's peak |Ω| \[rad/s\] (from its speed, else its angle's differences).
@@ -1078,7 +1090,7 @@ fn candidate_start(
         records.iter().filter_map(f).fold(0.0_f64, f64::max)
     };
     let w_max = peak(&peak_speed).max(1e-3);
-    let i_max = peak(&|r| Some(r.current.iter().fold(0.0_f64, |m, v| m.max(v.abs())))).max(1e-6);
+    let i_max = records_peak_current(records);
     let dt = records.iter().map(|r| r.dt).fold(f64::INFINITY, f64::min);
     let span = peak(&|r| Some(r.current.len() as f64 * r.dt));
     match kind {
@@ -1121,7 +1133,7 @@ fn candidate_start(
             knee_current_a: 0.05 * i_max,
         }),
         EffectKind::InductanceSaturation => Effect::InductanceSaturation(InductanceSaturation {
-            saturation_current_a: SATURATION_START_OVER_PEAK * i_max,
+            saturation_current_a: 2.0 * i_max,
             min_ratio: 0.9,
         }),
     }
