@@ -473,6 +473,55 @@ fn long_simulations_report_progress_unless_quiet() {
     assert!(!short.contains("simulate:"), "{short}");
 }
 
+/// Identifications that take seconds say what they are doing on standard error (issue "No
+/// silent wrong answers", item 9: nothing was printed during a 7 s fit of two 2M-row records):
+/// a step pair of more than 50 MB says that it reads, then fits how many samples, then how
+/// long it took; an output-error fit of 20,000 samples or more says it fits by simulation.
+/// `--quiet` prints none of it, and the results stay right.
+#[test]
+fn long_identifications_report_progress_unless_quiet() {
+    let dir = scratch("identify_progress");
+    // 2 × 500,001 rows of about 60 bytes: 62 MB.
+    let (hv, lv) = simulate_pair(&dir, "paper", "40", "2.5", "500");
+    let (h, l) = (hv.to_str().unwrap(), lv.to_str().unwrap());
+    let out = motorid(&["identify", "--high", h, "--low", l, "--json"]);
+    let err = stderr(&out);
+    assert!(out.status.success(), "{err}");
+    let lines: Vec<&str> = err.lines().collect();
+    let at = |prefix: &str| {
+        lines
+            .iter()
+            .position(|l| l.starts_with(prefix))
+            .unwrap_or_else(|| panic!("no `{prefix}…` in {err}"))
+    };
+    let (read, fit, done) = (
+        at(&format!("reading {h} and {l} (")),
+        at("read in "),
+        at("done in "),
+    );
+    assert!(read < fit && fit < done, "{err}");
+    assert!(lines[fit].ends_with("fitting 1000002 samples…"), "{err}");
+    let report: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
+    common::assert_truth_in_intervals(&report, &PAPER_TRUTH);
+    let quiet = motorid(&["identify", "--high", h, "--low", l, "--quiet"]);
+    assert!(quiet.status.success(), "{}", stderr(&quiet));
+    assert_eq!(stderr(&quiet), "", "--quiet printed");
+
+    // One 50,001-sample logger record by output error.
+    let short = dir.join("short.csv");
+    let mut args = LOGGER.to_vec();
+    args.extend_from_slice(&["--voltage", "40", "--duration", "50"]);
+    simulate_to(&short, &args);
+    let oe = motorid(&["identify", "--record", short.to_str().unwrap(), "--json"]);
+    let err = stderr(&oe);
+    assert!(oe.status.success(), "{err}");
+    assert!(
+        err.contains("fitting 1 record(s), 50001 samples, by simulation"),
+        "{err}"
+    );
+    assert!(err.lines().any(|l| l.starts_with("done in ")), "{err}");
+}
+
 /// Records of 10 samples (9 ms) end long before the current settles: the paper's method says
 /// the record is too short, with the settling time from the current's rise (Eq. (10): 5 τe,
 /// τe = L/R = 1 s for the paper's motor), instead of blaming the step voltage.

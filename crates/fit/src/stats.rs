@@ -267,7 +267,7 @@ pub(crate) fn fitted_residual_bias(
         }
     }
     let mut total = vec![0.0; q * q];
-    let mut c = vec![0.0; q];
+    let mut u = vec![0.0; q];
     for (idx, &lags) in rows.iter().zip(&layout.lags) {
         let m = idx.len();
         if m == 0 {
@@ -282,27 +282,57 @@ pub(crate) fn fitted_residual_bias(
             continue;
         }
         let v = idx.iter().map(|&i| r[i] * r[i]).sum::<f64>() / free;
+        // Σ_b w_ab Pᵢⱼ Jⱼᵀ = Kᵢᵀ M_a, M_a = Σ_b w_ab JⱼJⱼᵀ; the Bartlett weight is the share of
+        // the W = L + 1 row windows holding a that also hold b (see [`NeweyWest`]), so
+        // M_a = C_a / W with C_a the sum of the windows' B_k = Σ_{b ∈ k} JⱼJⱼᵀ over the W
+        // windows holding a: running sums, one window and one row at a time.
         let lags = lags.max(1);
-        let reach = lags.min(m - 1);
-        for (a, &i) in idx.iter().enumerate() {
-            c.fill(0.0);
-            let ki = row(&kr, i, q);
-            for (b, &j) in idx
-                .iter()
-                .enumerate()
-                .take((a + reach + 1).min(m))
-                .skip(a.saturating_sub(reach))
-            {
-                let weight = 1.0 - a.abs_diff(b) as f64 / (lags as f64 + 1.0);
-                let jj = row(&jr, j, q);
-                let w = weight * dot(ki, jj);
-                for (cell, x) in c.iter_mut().zip(jj) {
-                    *cell += w * x;
+        let w = lags + 1;
+        let jj = |b: usize| row(&jr, idx[b], q);
+        let mut window = vec![0.0; q * q];
+        let mut windows = vec![0.0; w * q * q];
+        let mut c = vec![0.0; q * q];
+        // Window kk − L holds rows kk − L … kk.
+        for kk in 0..m + lags {
+            if kk < m {
+                add_outer(&mut window, jj(kk), 1.0);
+            }
+            if kk >= w && kk - w < m {
+                add_outer(&mut window, jj(kk - w), -1.0);
+            }
+            let slot = kk % w;
+            if slot + 1 == w {
+                // Afresh every W windows, so that rounding does not build up.
+                window.fill(0.0);
+                for b in kk.saturating_sub(lags)..(kk + 1).min(m) {
+                    add_outer(&mut window, jj(b), 1.0);
                 }
             }
+            let held = &mut windows[slot * q * q..(slot + 1) * q * q];
+            for ((cell, old), new) in c.iter_mut().zip(held.iter_mut()).zip(&window) {
+                *cell += new - *old;
+                *old = *new;
+            }
+            if slot + 1 == w {
+                c.fill(0.0);
+                for held in windows.chunks_exact(q * q) {
+                    for (cell, x) in c.iter_mut().zip(held) {
+                        *cell += x;
+                    }
+                }
+            }
+            let Some(a) = kk.checked_sub(lags) else {
+                continue;
+            };
+            let i = idx[a];
+            let ki = row(&kr, i, q);
+            for (ua, crow) in u.iter_mut().zip(c.chunks_exact(q)) {
+                *ua = dot(crow, ki);
+            }
+            let scale = v / w as f64;
             for (ja, out) in row(&jr, i, q).iter().zip(total.chunks_exact_mut(q)) {
-                for (cell, cb) in out.iter_mut().zip(&c) {
-                    *cell += v * ja * cb;
+                for (cell, ub) in out.iter_mut().zip(&u) {
+                    *cell += scale * ja * ub;
                 }
             }
         }
@@ -317,13 +347,23 @@ pub(crate) fn fitted_residual_bias(
 /// `Σᵢ gᵢgᵢᵀ + Σₗ wₗ Σᵢ (gᵢgᵢ₋ₗᵀ + gᵢ₋ₗgᵢᵀ)` with Bartlett weights `wₗ = 1 − l/(L+1)`.
 /// Feed one series (a channel of a record) with [`NeweyWest::push`], then call
 /// [`NeweyWest::new_series`] before the next; series are taken as independent of each other.
+///
+/// The Bartlett weight `1 − |i−j|/(L+1)` is the share of the `L+1`-sample windows holding
+/// sample `i` that also hold `j`, so the sum is `1/(L+1) Σₖ SₖSₖᵀ` over every window `k`
+/// (those that run past either end of the series clipped to it), `Sₖ` the window's sum of
+/// scores: one outer product per sample instead of `2L+1`, and positive semi-definite by
+/// construction.
 #[derive(Debug, Clone)]
 pub struct NeweyWest {
     p: usize,
-    /// `p × p`, row-major.
+    /// The finished series' covariance, `p × p`, row-major.
+    done: Vec<f64>,
+    /// `Σₖ SₖSₖᵀ` over the current series' windows so far, `p × p`, row-major.
     sum: Vec<f64>,
-    /// The last `L` scores, `p` each, as a ring.
+    /// The last `L + 1` scores, `p` each, as a ring.
     ring: Vec<f64>,
+    /// The sum of the scores in the ring (the newest window).
+    window: Vec<f64>,
     lags: usize,
     seen: usize,
 }
@@ -335,8 +375,10 @@ impl NeweyWest {
         let lags = newey_west_lags(n).max(1);
         NeweyWest {
             p,
+            done: vec![0.0; p * p],
             sum: vec![0.0; p * p],
-            ring: vec![0.0; lags * p],
+            ring: vec![0.0; (lags + 1) * p],
+            window: vec![0.0; p],
             lags,
             seen: 0,
         }
@@ -344,86 +386,83 @@ impl NeweyWest {
 
     /// Starts a new independent series of about `n` samples.
     pub fn new_series(&mut self, n: usize) {
+        let finished = self.series_covariance();
+        for (d, f) in self.done.iter_mut().zip(finished) {
+            *d += f;
+        }
         self.lags = newey_west_lags(n).max(1);
-        self.ring = vec![0.0; self.lags * self.p];
+        self.sum.fill(0.0);
+        self.ring = vec![0.0; (self.lags + 1) * self.p];
+        self.window.fill(0.0);
         self.seen = 0;
     }
 
     /// Adds the next score of the current series (`p` values; extra ones are ignored, missing
     /// ones count as 0).
     pub fn push(&mut self, g: &[f64]) {
-        let p = self.p;
-        let g = &g[..p.min(g.len())];
-        // The usual sizes through a kernel of fixed size (the same sums in the same order,
-        // without the bounds checks and run-time loop lengths of the general one).
-        match (g.len() == p).then_some(p) {
-            Some(3) => self.accumulate::<3>(g),
-            Some(4) => self.accumulate::<4>(g),
-            Some(6) => self.accumulate::<6>(g),
-            Some(7) => self.accumulate::<7>(g),
-            Some(8) => self.accumulate::<8>(g),
-            _ => self.accumulate_any(g),
-        }
-        let slot = self.seen % self.lags;
+        let (p, w) = (self.p, self.lags + 1);
+        let slot = self.seen % w;
         let dst = &mut self.ring[slot * p..(slot + 1) * p];
-        dst.fill(0.0);
-        dst[..g.len()].copy_from_slice(g);
+        for (j, (cell, s)) in dst.iter_mut().zip(self.window.iter_mut()).enumerate() {
+            let new = g.get(j).copied().unwrap_or(0.0);
+            *s += new - *cell;
+            *cell = new;
+        }
         self.seen += 1;
-    }
-
-    /// The sums of [`NeweyWest::push`] for a score of exactly `N == p` values.
-    fn accumulate<const N: usize>(&mut self, g: &[f64]) {
-        let (Ok(g), Ok(sum)) = (
-            <&[f64; N]>::try_from(g),
-            <&mut [[f64; N]; N]>::try_from(self.sum.as_chunks_mut::<N>().0),
-        ) else {
-            return self.accumulate_any(g);
-        };
-        let (ring, _) = self.ring.as_chunks::<N>();
-        let lags = self.lags;
-        for (row, ga) in sum.iter_mut().zip(g) {
-            for (cell, gb) in row.iter_mut().zip(g) {
-                *cell += ga * gb;
-            }
-        }
-        for l in 1..=lags.min(self.seen) {
-            let weight = 1.0 - l as f64 / (lags as f64 + 1.0);
-            let Some(past) = ring.get((self.seen - l) % lags) else {
-                continue;
-            };
-            for ((row, ga), pa) in sum.iter_mut().zip(g).zip(past) {
-                for ((cell, gb), pb) in row.iter_mut().zip(g).zip(past) {
-                    *cell += weight * (ga * pb + pa * gb);
+        if slot + 1 == w {
+            // The ring holds exactly the window: its sum afresh, so that rounding does not
+            // build up over a long series.
+            self.window.fill(0.0);
+            for past in self.ring.chunks_exact(p) {
+                for (s, x) in self.window.iter_mut().zip(past) {
+                    *s += x;
                 }
             }
         }
+        add_outer(&mut self.sum, &self.window, 1.0);
     }
 
-    /// The sums of [`NeweyWest::push`] for a score of any length up to `p`.
-    fn accumulate_any(&mut self, g: &[f64]) {
-        let p = self.p;
-        let lags = self.lags;
-        for (a, ga) in g.iter().enumerate() {
-            for (b, gb) in g.iter().enumerate() {
-                self.sum[a * p + b] += ga * gb;
+    /// The current series' covariance: its windows so far, the windows that run past its
+    /// last sample, and the `1/(L+1)` of the Bartlett weights.
+    fn series_covariance(&self) -> Vec<f64> {
+        let (p, w) = (self.p, self.lags + 1);
+        let mut total = self.sum.clone();
+        // Windows starting at n−L … n−1: sums of the last L, L−1, …, 1 scores (all of the
+        // series once it is shorter).
+        let mut tail = vec![0.0; p];
+        for back in 1..=self.lags.min(self.seen) {
+            let slot = (self.seen - back) % w;
+            for (t, x) in tail.iter_mut().zip(&self.ring[slot * p..(slot + 1) * p]) {
+                *t += x;
+            }
+            add_outer(&mut total, &tail, 1.0);
+        }
+        if self.seen > 0 {
+            for _ in self.seen..self.lags {
+                add_outer(&mut total, &tail, 1.0);
             }
         }
-        for l in 1..=lags.min(self.seen) {
-            let weight = 1.0 - l as f64 / (lags as f64 + 1.0);
-            let slot = (self.seen - l) % lags;
-            let past = &self.ring[slot * p..(slot + 1) * p];
-            for (a, ga) in g.iter().enumerate() {
-                for (b, gb) in g.iter().enumerate() {
-                    self.sum[a * p + b] += weight * (ga * past[b] + past[a] * gb);
-                }
-            }
-        }
+        let scale = 1.0 / w as f64;
+        total.iter_mut().for_each(|x| *x *= scale);
+        total
     }
 
     /// The accumulated covariance (`p × p`), `None` if any entry is not finite.
     pub fn finish(&self) -> Option<DMatrix<f64>> {
-        let m = DMatrix::from_row_slice(self.p, self.p, &self.sum);
+        let current = self.series_covariance();
+        let sum: Vec<f64> = self.done.iter().zip(&current).map(|(d, c)| d + c).collect();
+        let m = DMatrix::from_row_slice(self.p, self.p, &sum);
         m.iter().all(|v| v.is_finite()).then_some(m)
+    }
+}
+
+/// `m += scale · x xᵀ` for a row-major `x.len()²` matrix `m`.
+fn add_outer(m: &mut [f64], x: &[f64], scale: f64) {
+    for (row, xa) in m.chunks_exact_mut(x.len()).zip(x) {
+        let a = scale * xa;
+        for (cell, xb) in row.iter_mut().zip(x) {
+            *cell += a * xb;
+        }
     }
 }
 
@@ -735,10 +774,73 @@ mod tests {
         assert!(plain[(1, 1)] < 0.5 * truth[(1, 1)], "{}", plain[(1, 1)]);
     }
 
+    /// [`fitted_residual_bias`] by its definition, `Σ_series v_s Σ_{|a−b|≤L} w_ab Pᵢⱼ JᵢJⱼᵀ`,
+    /// term by term.
+    fn bias_by_definition(
+        r: &[f64],
+        jac: &DMatrix<f64>,
+        h_inv: &DMatrix<f64>,
+        layout: &SeriesLayout,
+    ) -> DMatrix<f64> {
+        let q = jac.ncols();
+        let projector = jac * h_inv * jac.transpose();
+        let mut total = DMatrix::zeros(q, q);
+        for (s, &lags) in layout.lags.iter().enumerate() {
+            let idx: Vec<usize> = (0..r.len())
+                .filter(|&i| layout.series[i] == Some(s))
+                .collect();
+            let free = idx.len() as f64 - idx.iter().map(|&i| projector[(i, i)]).sum::<f64>();
+            let v = idx.iter().map(|&i| r[i] * r[i]).sum::<f64>() / free;
+            let lags = lags.max(1);
+            for (a, &i) in idx.iter().enumerate() {
+                for (b, &j) in idx.iter().enumerate() {
+                    let d = a.abs_diff(b);
+                    if d <= lags {
+                        let weight = 1.0 - d as f64 / (lags as f64 + 1.0);
+                        total +=
+                            v * weight * projector[(i, j)] * jac.row(i).transpose() * jac.row(j);
+                    }
+                }
+            }
+        }
+        (&total + total.transpose()) * 0.5
+    }
+
+    /// The running-window [`fitted_residual_bias`] equals its definition: series of many
+    /// windows, of fewer rows than a window, of one row, interleaved, and rows in none.
+    #[test]
+    fn fitted_residual_bias_matches_its_definition() {
+        let mut rng = motor_model::NoiseRng::new(9);
+        let n = 260;
+        let q = 5;
+        let jac = DMatrix::from_fn(n, q, |_, _| rng.normal());
+        let r: Vec<f64> = (0..n).map(|_| rng.normal()).collect();
+        let h_inv = scaled_inverse(&jac.tr_mul(&jac)).unwrap();
+        let series: Vec<Option<usize>> = (0..n)
+            .map(|i| match i {
+                0..=199 => Some(i % 2),
+                200..=205 => Some(2),
+                206 => Some(3),
+                207..=209 => None,
+                _ => Some(i % 2),
+            })
+            .collect();
+        let layout = SeriesLayout {
+            series,
+            lags: vec![5, 3, 9, 2],
+        };
+        let fast = fitted_residual_bias(&r, &jac, &h_inv, &layout).unwrap();
+        let slow = bias_by_definition(&r, &jac, &h_inv, &layout);
+        assert!(
+            (&fast - &slow).norm() < 1e-12 * slow.norm(),
+            "{fast} {slow}"
+        );
+    }
+
     /// The whole-vector Newey–West covariance equals the accumulator's, series by series.
     #[test]
     fn score_covariance_of_the_whole_vector_matches_the_accumulator() {
-        let n = [300usize, 1, 120];
+        let n = [300usize, 1, 120, 3, 7];
         let rows: usize = n.iter().sum();
         let mut x = 0.3_f64;
         let mut next = || {
