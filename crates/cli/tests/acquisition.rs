@@ -108,7 +108,12 @@ fn acquired_records_equal_simulate_and_identify_the_paper_motor() {
     let dir = scratch("acquire");
     let emulator = Emulator::start(&[]);
     let (hv, lv) = (dir.join("hv.csv"), dir.join("lv.csv"));
-    for (volts, path, extra) in [("40", &hv, &[][..]), ("2.5", &lv, &["--live"][..])] {
+    // The low step is written through a symbolic link to an older record (issue "No silent
+    // wrong answers", item 1: `acquire -o` replaced the link by a regular file).
+    std::fs::write(&lv, "an older record\n").unwrap();
+    let link = dir.join("latest.csv");
+    std::os::unix::fs::symlink("lv.csv", &link).unwrap();
+    for (volts, path, extra) in [("40", &hv, &[][..]), ("2.5", &link, &["--live"][..])] {
         let out = acquire(&emulator.port, volts, path, extra);
         assert!(out.status.success(), "{}", stderr(&out));
         assert!(
@@ -117,6 +122,10 @@ fn acquired_records_equal_simulate_and_identify_the_paper_motor() {
             stderr(&out)
         );
     }
+    assert!(std::fs::symlink_metadata(&link)
+        .unwrap()
+        .file_type()
+        .is_symlink());
     let (shv, slv) = (dir.join("sim_hv.csv"), dir.join("sim_lv.csv"));
     simulate(&shv, "40", "1");
     simulate(&slv, "2.5", "2");

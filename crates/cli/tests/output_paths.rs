@@ -291,6 +291,19 @@ fn bad_output_paths_are_refused_before_any_work() {
         &[&sim[..], &[dir.join("to-dir").to_str().unwrap()]].concat(),
         "a directory",
     );
+    // Before the port is opened: no such port here.
+    assert_bad_input(
+        &[
+            "acquire",
+            "--port",
+            "/no/such/port",
+            "--voltage",
+            "1",
+            "-o",
+            d,
+        ],
+        "is a directory",
+    );
     assert_bad_input(&["fleet", "--out", f, "--motors", "1"], "--out");
     assert_bad_input(&["emps", "--plot", f], "not a directory");
 

@@ -746,7 +746,7 @@ pub(crate) trait WeightedProblem: LeastSquares {
     fn parameters(&self) -> &Parameters;
     /// The noise level of every channel, in a fixed order.
     fn sigmas_mut(&mut self) -> Vec<&mut f64>;
-    /// Whether [`fit_weighted`] reweights each channel by its own residual at the first
+    /// Whether [`fit_weighted_point`] reweights each channel by its own residual at the first
     /// solution (the default); `false` when the noise levels were given and are kept.
     fn reweights(&self) -> bool {
         true
@@ -766,12 +766,15 @@ pub(crate) trait WeightedProblem: LeastSquares {
 }
 
 /// Fits `problem` from `theta0` in two stages (one when it keeps given weights,
-/// [`WeightedProblem::reweights`]) and reports the parameters with their intervals.
-pub(crate) fn fit_weighted<P: WeightedProblem>(
+/// [`WeightedProblem::reweights`]), still without intervals: the estimate, its quality and
+/// the normal equations at it for [`attach_intervals`], which a caller that may refit at once
+/// (with moved inputs) calls only on the fit it keeps. The Newey–West score covariance behind
+/// the intervals costs as much as several iterations on a long record.
+pub(crate) fn fit_weighted_point<P: WeightedProblem>(
     problem: &mut P,
     theta0: &[f64],
     settings: LmSettings,
-) -> Result<FullFit, FitError> {
+) -> Result<(FullFit, NormalEquations), FitError> {
     let first = solve(&*problem, theta0, settings)?;
     // Second stage: weight each channel by its own residual RMS at the first solution, so that
     // every channel's weighted residuals have unit variance and the pooled variance behind the
@@ -806,12 +809,7 @@ pub(crate) fn fit_weighted<P: WeightedProblem>(
         .parameters()
         .decode(&theta)
         .ok_or_else(|| FitError::Solver("parameters left the representable range".into()))?;
-    // Intervals from the Newey–West sandwich (residuals of logged signals are rarely white),
-    // then the delta method through each parameter's transform back to SI units.
-    let unc = problem
-        .score_covariance(&theta)
-        .and_then(|s| sandwich_uncertainty(&report.normal, &s));
-    let mut fit = FullFit {
+    let fit = FullFit {
         params,
         effects,
         effect_estimates: Vec::new(),
@@ -828,15 +826,23 @@ pub(crate) fn fit_weighted<P: WeightedProblem>(
         theta,
         theta_covariance: None,
     };
+    Ok((fit, report.normal))
+}
+
+/// Sets the intervals of a fit by [`fit_weighted_point`] from `normal`, its normal equations,
+/// and judges it ([`assess`]): the Newey–West sandwich (residuals of logged signals are rarely
+/// white), then the delta method through each parameter's transform back to SI units.
+pub(crate) fn attach_intervals<P: WeightedProblem>(
+    problem: &P,
+    fit: &mut FullFit,
+    normal: &NormalEquations,
+) {
+    let unc = problem
+        .score_covariance(&fit.theta)
+        .and_then(|s| sandwich_uncertainty(normal, &s));
     let dof = unc.as_ref().map_or(0, |u| u.dof);
-    set_intervals(
-        &mut fit,
-        problem.parameters(),
-        unc.map(|u| u.covariance),
-        dof,
-    );
-    fit.refusal = assess(&fit, &problem.facts());
-    Ok(fit)
+    set_intervals(fit, problem.parameters(), unc.map(|u| u.covariance), dof);
+    fit.refusal = assess(fit, &problem.facts());
 }
 
 /// Sets the intervals of `fit` (motor and effects, SI units) from the covariance of its θ

@@ -22,7 +22,9 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::FitError;
-use crate::full_model::{fit_weighted, set_intervals, FullFit, WeightedProblem};
+use crate::full_model::{
+    attach_intervals, fit_weighted_point, set_intervals, FullFit, WeightedProblem,
+};
 use crate::lm::LmSettings;
 use crate::stats::{fitted_residual_bias, scaled_inverse};
 
@@ -533,7 +535,7 @@ fn linearise<P: NuisanceProblem>(problem: &mut P, theta: &[f64]) -> Option<Joint
     })
 }
 
-/// Fits `problem` from `theta0` as [`fit_weighted`] does, then moves its uncertain inputs
+/// Fits `problem` from `theta0` as [`fit_weighted_point`] does, then moves its uncertain inputs
 /// where the records put them (joint Gauss–Newton with their prior), refits, and widens the
 /// intervals by the inputs' posterior uncertainty (see the module documentation).
 pub(crate) fn fit_with_inputs<P: NuisanceProblem>(
@@ -541,18 +543,24 @@ pub(crate) fn fit_with_inputs<P: NuisanceProblem>(
     theta0: &[f64],
     settings: LmSettings,
 ) -> Result<FullFit, FitError> {
-    let mut fit = fit_weighted(problem, theta0, settings)?;
+    // Intervals only for the fit that is kept: each refit replaces the one before.
+    let (mut fit, mut normal) = fit_weighted_point(problem, theta0, settings)?;
     if problem.nuisances().is_empty() {
+        attach_intervals(problem, &mut fit, &normal);
         return Ok(fit);
     }
     let p = problem.parameters().len();
     let mut iterations = fit.iterations;
     for _ in 0..REFINE_PASSES {
-        if !fit.termination.converged() {
-            return Ok(fit);
-        }
         let theta = fit.theta.clone();
-        let Some(joint) = linearise(problem, &theta) else {
+        let joint = if fit.termination.converged() {
+            linearise(problem, &theta)
+        } else {
+            None
+        };
+        let Some(joint) = joint else {
+            fit.iterations = iterations;
+            attach_intervals(problem, &mut fit, &normal);
             return Ok(fit);
         };
         let nuisances = problem.nuisances();
@@ -578,17 +586,27 @@ pub(crate) fn fit_with_inputs<P: NuisanceProblem>(
         } else {
             theta
         };
-        let refit = fit_weighted(problem, &restart, settings)?;
+        let (refit, refit_normal) = fit_weighted_point(problem, &restart, settings)?;
         iterations += refit.iterations;
-        fit = refit;
+        (fit, normal) = (refit, refit_normal);
     }
     fit.iterations = iterations;
     let theta = fit.theta.clone();
-    if let Some(joint) = linearise(problem, &theta) {
+    let joint = linearise(problem, &theta).map(|joint| {
         let cov = problem
             .fitted_score_covariance(&joint.r, &joint.jac, &joint.h_inv)
             .and_then(|score| joint.theta_covariance(&score, p));
-        let dof = joint.r.len().saturating_sub(p);
+        (cov, joint.r.len().saturating_sub(p))
+    });
+    let widened = joint.as_ref().is_some_and(|(cov, dof)| {
+        cov.as_ref()
+            .is_some_and(|c| problem.parameters().intervals(&theta, c, *dof).is_some())
+    });
+    if !widened {
+        // The fit's own intervals stand where the joint ones cannot be computed.
+        attach_intervals(problem, &mut fit, &normal);
+    }
+    if let Some((cov, dof)) = joint {
         set_intervals(&mut fit, problem.parameters(), cov, dof);
     }
     // The widened intervals are the ones reported: judge the result on them.
