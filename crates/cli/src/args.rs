@@ -239,7 +239,9 @@ pub struct MontecarloArgs {
     #[arg(long, default_value_t = 0.0)]
     pub motor_spread: f64,
     /// Stretch every conditioning range by a random 0-5 % per record, so that a level's place
-    /// between two ADC codes differs from run to run.
+    /// between two ADC codes differs from run to run (required with --noise-lsb 0 or
+    /// --voltage-noise-lsb 0: without noise the runs would otherwise share one quantisation
+    /// error).
     #[arg(long)]
     pub vary_range: bool,
     /// Return each step to 0 V after --duration (at a random instant within a sample period

@@ -568,6 +568,20 @@ fn settings_are_checked_before_the_first_run() {
             "--runs 1000000000000: expected 1 to 1000000 record pairs",
         ),
         (mc(&["--adc-bits", "30"]), "--adc-bits 30: expected 1 to 24 bits"),
+        // Issue "No silent wrong answers", item 5: `montecarlo --noise-lsb 0` reported 0 %
+        // coverage — every run read the 40 V level exactly halfway between two codes.
+        (
+            mc(&["--noise-lsb", "0", "--subsample-step", "--motor-spread", "0.02"]),
+            "--noise-lsb 0 without --vary-range: with no noise every run reads each level at the same place between two ADC codes",
+        ),
+        (
+            mc(&["--voltage-noise-lsb", "0"]),
+            "--voltage-noise-lsb 0 without --vary-range",
+        ),
+        (
+            mc(&["--noise-lsb", "0", "--voltage-noise-lsb", "1"]),
+            "--noise-lsb 0 (current and speed, no --motor-spread) without --vary-range",
+        ),
         // The paper's motor breaks away above R·Ts/k = 0.3 · 0.03 / 0.15 = 0.06 V.
         (
             mc(&["--low-voltage", "0.01"]),

@@ -152,6 +152,26 @@ impl Settings {
         // refused with what to fix, not run into a table of NaN.
         let motor = settings::motor(&a.motor.motor)?;
         let logger = Logger::new(a.duration, a.rate, a.adc_bits, a.noise_lsb, a.encoder_cpr)?;
+        // Without noise a reading is the code of its level, the same in every run unless the
+        // ranges (or, for the current, the motor) move: the runs would share one quantisation error (the paper's 40 V sits
+        // exactly halfway between two codes of the 0–48 V range) and count one place of the
+        // grid, not the intervals' coverage.
+        let silent = if a.noise_lsb == 0.0 && a.voltage_noise_lsb.is_none_or(|v| v == 0.0) {
+            Some("--noise-lsb 0")
+        } else if a.voltage_noise_lsb == Some(0.0) {
+            Some("--voltage-noise-lsb 0")
+        } else if a.noise_lsb == 0.0 && a.motor_spread == 0.0 {
+            // A noisy voltage leaves the true current where it was: only another motor moves it.
+            Some("--noise-lsb 0 (current and speed, no --motor-spread)")
+        } else {
+            None
+        };
+        if let (Some(flag), false) = (silent, a.vary_range) {
+            return Err(BadInput(format!(
+                "{flag} without --vary-range: with no noise every run reads each level at the same place between two ADC codes, so the runs share one quantisation error and their coverage measures that one place, not the intervals; add --vary-range"
+            ))
+            .into());
+        }
         // A step that returns to 0 V holds for --duration, and the record runs as long again.
         let hold_s = a.return_to_zero.then_some(logger.duration_s);
         let record_logger = match hold_s {
