@@ -299,6 +299,8 @@ fn bad_output_paths_are_refused_before_any_work() {
             "/no/such/port",
             "--voltage",
             "1",
+            "--duration",
+            "1",
             "-o",
             d,
         ],
