@@ -255,11 +255,17 @@ pub(crate) fn fitted_residual_bias(
     if r.len() != n || layout.series.len() != n || h_inv.shape() != (q, q) {
         return None;
     }
-    // Rows as contiguous slices: J and K = J H⁻¹ (H⁻¹ symmetric), row-major.
-    let k = jac * h_inv;
-    let row_major = |m: &DMatrix<f64>| -> Vec<f64> { m.transpose().as_slice().to_vec() };
-    let (jr, kr) = (row_major(jac), row_major(&k));
     let dot = |a: &[f64], b: &[f64]| -> f64 { a.iter().zip(b).map(|(x, y)| x * y).sum() };
+    // J's rows as contiguous slices (row-major); the rows of K = J H⁻¹ (H⁻¹ symmetric) are
+    // formed as they are needed: on a long record a second n × q matrix is hundreds of MB.
+    let jr: Vec<f64> = jac.transpose().as_slice().to_vec();
+    let hr: Vec<f64> = h_inv.transpose().as_slice().to_vec();
+    let k_row = |i: usize, out: &mut [f64]| {
+        let ji = row(&jr, i, q);
+        for (o, h) in out.iter_mut().zip(hr.chunks_exact(q)) {
+            *o = dot(h, ji);
+        }
+    };
     let mut rows: Vec<Vec<usize>> = vec![Vec::new(); layout.lags.len()];
     for (i, s) in layout.series.iter().enumerate() {
         if let Some(s) = s {
@@ -268,6 +274,7 @@ pub(crate) fn fitted_residual_bias(
     }
     let mut total = vec![0.0; q * q];
     let mut u = vec![0.0; q];
+    let mut ki = vec![0.0; q];
     for (idx, &lags) in rows.iter().zip(&layout.lags) {
         let m = idx.len();
         if m == 0 {
@@ -275,7 +282,10 @@ pub(crate) fn fitted_residual_bias(
         }
         let leverage: f64 = idx
             .iter()
-            .map(|&i| dot(row(&kr, i, q), row(&jr, i, q)))
+            .map(|&i| {
+                k_row(i, &mut ki);
+                dot(&ki, row(&jr, i, q))
+            })
             .sum();
         let free = m as f64 - leverage;
         if free <= 0.0 {
@@ -325,9 +335,9 @@ pub(crate) fn fitted_residual_bias(
                 continue;
             };
             let i = idx[a];
-            let ki = row(&kr, i, q);
+            k_row(i, &mut ki);
             for (ua, crow) in u.iter_mut().zip(c.chunks_exact(q)) {
-                *ua = dot(crow, ki);
+                *ua = dot(crow, &ki);
             }
             let scale = v / w as f64;
             for (ja, out) in row(&jr, i, q).iter().zip(total.chunks_exact_mut(q)) {
