@@ -153,9 +153,9 @@ impl Settings {
         let motor = settings::motor(&a.motor.motor)?;
         let logger = Logger::new(a.duration, a.rate, a.adc_bits, a.noise_lsb, a.encoder_cpr)?;
         // Without noise a reading is the code of its level, the same in every run unless the
-        // ranges (or, for the current, the motor) move: the runs would share one quantisation error (the paper's 40 V sits
-        // exactly halfway between two codes of the 0–48 V range) and count one place of the
-        // grid, not the intervals' coverage.
+        // ranges (or, for the current, the motor) move: the runs would share one quantisation
+        // error (the paper's 40 V sits exactly halfway between two codes of the 0–48 V range)
+        // and count one place of the grid, not the intervals' coverage.
         let silent = if a.noise_lsb == 0.0 && a.voltage_noise_lsb.is_none_or(|v| v == 0.0) {
             Some("--noise-lsb 0")
         } else if a.voltage_noise_lsb == Some(0.0) {
