@@ -10,13 +10,35 @@ use motor_model::{
 use crate::args::{InitialStateArg, MeasurementArgs, MethodArg, SpeedFromArg};
 use crate::BadInput;
 
+/// Longest settings file read (a motor, a start, a calibration): a few hundred bytes in use;
+/// beyond this the path names something else (`/dev/zero` would be read for ever).
+const MAX_SETTINGS_BYTES: u64 = 1 << 20;
+
+/// The text of a small settings file at `path`, at most [`MAX_SETTINGS_BYTES`]; the error says
+/// why it cannot be read (an I/O error, not UTF-8, too large).
+pub fn read_settings_file(path: &Path) -> std::result::Result<String, String> {
+    use std::io::Read;
+    let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
+    let mut text = String::new();
+    file.take(MAX_SETTINGS_BYTES + 1)
+        .read_to_string(&mut text)
+        .map_err(|e| e.to_string())?;
+    if text.len() as u64 > MAX_SETTINGS_BYTES {
+        return Err(format!(
+            "more than {} bytes: not a settings file",
+            MAX_SETTINGS_BYTES
+        ));
+    }
+    Ok(text)
+}
+
 /// `paper` or a JSON file with keys R, L, k, f, J, Ts.
 pub fn motor(spec: &str) -> Result<MotorParams> {
     if spec == "paper" {
         return Ok(MotorParams::paper());
     }
     let path = Path::new(spec);
-    let text = std::fs::read_to_string(path).map_err(|e| {
+    let text = read_settings_file(path).map_err(|e| {
         BadInput(format!(
             "--motor {spec}: cannot read the file ({e}); give `paper` or a JSON file with keys R, L, k, f, J, Ts"
         ))

@@ -568,6 +568,11 @@ fn settings_are_checked_before_the_first_run() {
             "--runs 1000000000000: expected 1 to 1000000 record pairs",
         ),
         (mc(&["--adc-bits", "30"]), "--adc-bits 30: expected 1 to 24 bits"),
+        // A settings file is read up to 1 MiB: /dev/zero grew to gigabytes and never ended.
+        (
+            vec!["model", "--motor", "/dev/zero"],
+            "--motor /dev/zero: cannot read the file (more than 1048576 bytes: not a settings file)",
+        ),
         // Issue "No silent wrong answers", item 5: `montecarlo --noise-lsb 0` reported 0 %
         // coverage — every run read the 40 V level exactly halfway between two codes.
         (

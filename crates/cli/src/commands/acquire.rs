@@ -35,7 +35,7 @@ fn calibration(a: &AcquireArgs) -> Result<Calibration> {
     let Some(path) = &a.calibration else {
         return Ok(Calibration::default());
     };
-    let text = std::fs::read_to_string(path)
+    let text = crate::settings::read_settings_file(path)
         .map_err(|e| BadInput(format!("{}: cannot read ({e})", path.display())))?;
     let cal: Calibration = serde_json::from_str(&text).map_err(|e| {
         BadInput(format!(
