@@ -300,8 +300,8 @@ pub(crate) fn fitted_residual_bias(
         let w = lags + 1;
         let jj = |b: usize| row(&jr, idx[b], q);
         let mut window = vec![0.0; q * q];
-        let mut windows = vec![0.0; w * q * q];
-        let mut c = vec![0.0; q * q];
+        let mut c = WindowSum::new(w, q * q);
+        let scale = v / w as f64;
         // Window kk − L holds rows kk − L … kk.
         for kk in 0..m + lags {
             if kk < m {
@@ -310,36 +310,22 @@ pub(crate) fn fitted_residual_bias(
             if kk >= w && kk - w < m {
                 add_outer(&mut window, jj(kk - w), -1.0);
             }
-            let slot = kk % w;
-            if slot + 1 == w {
+            if (kk + 1) % w == 0 {
                 // Afresh every W windows, so that rounding does not build up.
                 window.fill(0.0);
                 for b in kk.saturating_sub(lags)..(kk + 1).min(m) {
                     add_outer(&mut window, jj(b), 1.0);
                 }
             }
-            let held = &mut windows[slot * q * q..(slot + 1) * q * q];
-            for ((cell, old), new) in c.iter_mut().zip(held.iter_mut()).zip(&window) {
-                *cell += new - *old;
-                *old = *new;
-            }
-            if slot + 1 == w {
-                c.fill(0.0);
-                for held in windows.chunks_exact(q * q) {
-                    for (cell, x) in c.iter_mut().zip(held) {
-                        *cell += x;
-                    }
-                }
-            }
+            c.push(&window);
             let Some(a) = kk.checked_sub(lags) else {
                 continue;
             };
             let i = idx[a];
             k_row(i, &mut ki);
-            for (ua, crow) in u.iter_mut().zip(c.chunks_exact(q)) {
+            for (ua, crow) in u.iter_mut().zip(c.sum().chunks_exact(q)) {
                 *ua = dot(crow, &ki);
             }
-            let scale = v / w as f64;
             for (ja, out) in row(&jr, i, q).iter().zip(total.chunks_exact_mut(q)) {
                 for (cell, ub) in out.iter_mut().zip(&u) {
                     *cell += scale * ja * ub;
@@ -370,12 +356,9 @@ pub struct NeweyWest {
     done: Vec<f64>,
     /// `Σₖ SₖSₖᵀ` over the current series' windows so far, `p × p`, row-major.
     sum: Vec<f64>,
-    /// The last `L + 1` scores, `p` each, as a ring.
-    ring: Vec<f64>,
-    /// The sum of the scores in the ring (the newest window).
-    window: Vec<f64>,
+    /// The last `L + 1` scores and their sum (the newest window).
+    window: WindowSum,
     lags: usize,
-    seen: usize,
 }
 
 impl NeweyWest {
@@ -387,10 +370,8 @@ impl NeweyWest {
             p,
             done: vec![0.0; p * p],
             sum: vec![0.0; p * p],
-            ring: vec![0.0; (lags + 1) * p],
-            window: vec![0.0; p],
+            window: WindowSum::new(lags + 1, p),
             lags,
-            seen: 0,
         }
     }
 
@@ -402,57 +383,36 @@ impl NeweyWest {
         }
         self.lags = newey_west_lags(n).max(1);
         self.sum.fill(0.0);
-        self.ring = vec![0.0; (self.lags + 1) * self.p];
-        self.window.fill(0.0);
-        self.seen = 0;
+        self.window = WindowSum::new(self.lags + 1, self.p);
     }
 
     /// Adds the next score of the current series (`p` values; extra ones are ignored, missing
     /// ones count as 0).
     pub fn push(&mut self, g: &[f64]) {
-        let (p, w) = (self.p, self.lags + 1);
-        let slot = self.seen % w;
-        let dst = &mut self.ring[slot * p..(slot + 1) * p];
-        for (j, (cell, s)) in dst.iter_mut().zip(self.window.iter_mut()).enumerate() {
-            let new = g.get(j).copied().unwrap_or(0.0);
-            *s += new - *cell;
-            *cell = new;
-        }
-        self.seen += 1;
-        if slot + 1 == w {
-            // The ring holds exactly the window: its sum afresh, so that rounding does not
-            // build up over a long series.
-            self.window.fill(0.0);
-            for past in self.ring.chunks_exact(p) {
-                for (s, x) in self.window.iter_mut().zip(past) {
-                    *s += x;
-                }
-            }
-        }
-        add_outer(&mut self.sum, &self.window, 1.0);
+        self.window.push(g);
+        add_outer(&mut self.sum, self.window.sum(), 1.0);
     }
 
     /// The current series' covariance: its windows so far, the windows that run past its
     /// last sample, and the `1/(L+1)` of the Bartlett weights.
     fn series_covariance(&self) -> Vec<f64> {
-        let (p, w) = (self.p, self.lags + 1);
+        let seen = self.window.seen;
         let mut total = self.sum.clone();
         // Windows starting at n−L … n−1: sums of the last L, L−1, …, 1 scores (all of the
         // series once it is shorter).
-        let mut tail = vec![0.0; p];
-        for back in 1..=self.lags.min(self.seen) {
-            let slot = (self.seen - back) % w;
-            for (t, x) in tail.iter_mut().zip(&self.ring[slot * p..(slot + 1) * p]) {
+        let mut tail = vec![0.0; self.p];
+        for back in 1..=self.lags.min(seen) {
+            for (t, x) in tail.iter_mut().zip(self.window.past(back)) {
                 *t += x;
             }
             add_outer(&mut total, &tail, 1.0);
         }
-        if self.seen > 0 {
-            for _ in self.seen..self.lags {
+        if seen > 0 {
+            for _ in seen..self.lags {
                 add_outer(&mut total, &tail, 1.0);
             }
         }
-        let scale = 1.0 / w as f64;
+        let scale = 1.0 / (self.lags + 1) as f64;
         total.iter_mut().for_each(|x| *x *= scale);
         total
     }
@@ -463,6 +423,63 @@ impl NeweyWest {
         let sum: Vec<f64> = self.done.iter().zip(&current).map(|(d, c)| d + c).collect();
         let m = DMatrix::from_row_slice(self.p, self.p, &sum);
         m.iter().all(|v| v.is_finite()).then_some(m)
+    }
+}
+
+/// The running sum of the last `w` vectors of `d` values pushed (zeros before the first),
+/// summed afresh from its ring every `w` pushes so that rounding does not build up over a
+/// long series.
+#[derive(Debug, Clone)]
+struct WindowSum {
+    d: usize,
+    /// The last `w` vectors, `d` each, as a ring.
+    ring: Vec<f64>,
+    sum: Vec<f64>,
+    seen: usize,
+}
+
+impl WindowSum {
+    fn new(w: usize, d: usize) -> Self {
+        WindowSum {
+            d,
+            ring: vec![0.0; w * d],
+            sum: vec![0.0; d],
+            seen: 0,
+        }
+    }
+
+    /// Adds `x` (missing values count as 0, extra ones are ignored) and drops the vector `w`
+    /// pushes old.
+    fn push(&mut self, x: &[f64]) {
+        let (d, w) = (self.d, self.ring.len() / self.d.max(1));
+        let slot = self.seen % w;
+        let held = &mut self.ring[slot * d..(slot + 1) * d];
+        for (j, (old, s)) in held.iter_mut().zip(self.sum.iter_mut()).enumerate() {
+            let new = x.get(j).copied().unwrap_or(0.0);
+            *s += new - *old;
+            *old = new;
+        }
+        self.seen += 1;
+        if slot + 1 == w {
+            self.sum.fill(0.0);
+            for past in self.ring.chunks_exact(d) {
+                for (s, v) in self.sum.iter_mut().zip(past) {
+                    *s += v;
+                }
+            }
+        }
+    }
+
+    /// The sum of the last `w` vectors pushed.
+    fn sum(&self) -> &[f64] {
+        &self.sum
+    }
+
+    /// The vector pushed `back` pushes ago (1: the last; `back` from 1 to `w`).
+    fn past(&self, back: usize) -> &[f64] {
+        let w = self.ring.len() / self.d.max(1);
+        let slot = (self.seen - back) % w;
+        &self.ring[slot * self.d..(slot + 1) * self.d]
     }
 }
 
