@@ -252,3 +252,27 @@ fn small_servo_steps_by_output_error_start_from_the_pooled_torque_equation() {
     let report: Value = serde_json::from_str(&stdout(&out)).unwrap();
     assert_truth_in_intervals(&report, &SMALL_SERVO_TRUTH);
 }
+
+#[test]
+fn a_noise_free_adc_pair_with_an_exact_angle_column_is_not_overconfident() {
+    // Exit 0 with R 0.3001839 [0.3001832, 0.3001846] (truth 0.3): the exact angle column made
+    // the encoder speed's noise 1e-12 of its range, and 40 V on 0–48 V and 2.5 V on 0–3 V both
+    // read half a step high, an error the two levels taken as independent halved.
+    let dir = scratch("noise-free-pair");
+    let (hv, lv) = (dir.join("h.csv"), dir.join("l.csv"));
+    for (path, volts) in [(&hv, "40"), (&lv, "2.5")] {
+        simulate_to(
+            path,
+            &["--voltage", volts, "--adc-bits", "10", "--noise-lsb", "0"],
+        );
+    }
+    let (v, out) = json_of(&[
+        "identify",
+        "--high",
+        hv.to_str().unwrap(),
+        "--low",
+        lv.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert_truth_in_intervals(&v, &TRUTH);
+}

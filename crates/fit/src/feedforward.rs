@@ -24,8 +24,10 @@ use motor_model::{central_difference, Input, MotorParams};
 use nalgebra::DMatrix;
 
 use crate::error::FitError;
-use crate::full_model::{noise_std, quality_from_sums, Channel, ChannelQuality};
-use crate::input_uncertainty::LevelPrior;
+use crate::full_model::{
+    noise_floor, noise_std, quality_from_sums, reweighted_sigma, Channel, ChannelQuality,
+};
+use crate::input_uncertainty::{pooled_level_variance, LevelPrior};
 use crate::lm::{
     half_squared_norm, solve, LeastSquares, LmReport, LmSettings, NormalEquations, Termination,
 };
@@ -539,6 +541,8 @@ struct FfRecord {
     keep: Vec<usize>,
     data: Vec<f64>,
     sigma: f64,
+    /// The smallest `sigma` may become ([`noise_floor`] of `data`).
+    floor: f64,
     /// Which of the fitted initial speeds is this record's (0 for the first such record), if
     /// it does not start at rest.
     free_start: Option<usize>,
@@ -779,6 +783,11 @@ pub fn identify_feedforward(
     let mut positions = Vec::with_capacity(records.len());
     let mut free = 0usize;
     let mut nuisances = 0usize;
+    let uncertain_levels = records
+        .iter()
+        .flat_map(|r| r.priors)
+        .filter(|q| q.volts_variance_v2 > 0.0)
+        .count();
     for (k, rec) in records.iter().enumerate() {
         let label = format!("record {}", k + 1);
         if !(rec.dt.is_finite() && rec.dt > 0.0) {
@@ -867,7 +876,13 @@ pub fn identify_feedforward(
                         Level {
                             volts: *v,
                             start_s: *t,
-                            volts_sd: q.volts_variance_v2.max(0.0).sqrt(),
+                            volts_sd: pooled_level_variance(
+                                q.volts_variance_v2,
+                                q.volts_bias_variance_v2,
+                                uncertain_levels,
+                            )
+                            .max(0.0)
+                            .sqrt(),
                             start_sd: q.start_variance_s2.max(0.0).sqrt(),
                             volts_slot,
                             start_slot,
@@ -904,6 +919,7 @@ pub fn identify_feedforward(
             n,
             kind,
             keep,
+            floor: noise_floor(&data),
             data,
             sigma,
             free_start,
@@ -1194,8 +1210,8 @@ fn fit_stages(
     let quality = problem.quality(&first.params);
     let mut changed = false;
     for (r, q) in problem.records.iter_mut().zip(&quality) {
-        if q.rms_residual.is_finite() && q.rms_residual > 1e3 * r.sigma * f64::EPSILON.sqrt() {
-            r.sigma = q.rms_residual;
+        if let Some(s) = reweighted_sigma(r.sigma, r.floor, q.rms_residual) {
+            r.sigma = s;
             changed = true;
         }
     }

@@ -14,8 +14,8 @@ use nalgebra::{DMatrix, DVector};
 use crate::error::FitError;
 use crate::initial_state::FittedInitialState;
 use crate::input_uncertainty::{
-    fit_with_inputs, grid_phase_score_covariance, noise_free_quantum, settled_current, Nuisance,
-    NuisanceProblem, StepInputs,
+    fit_with_inputs, grid_phase_score_covariance, noise_free_quantum, pooled_level_variance,
+    settled_current, Nuisance, NuisanceProblem, StepInputs,
 };
 use crate::lm::{solve, LeastSquares, LmSettings, NormalEquations, Termination};
 use crate::parameters::{names_of, units_of, EffectEstimate, Parameters, MOTOR};
@@ -210,18 +210,13 @@ const NOISE_TRIM: f64 = 0.005;
 /// dropped, over `√6` (the second difference of white noise has variance 6σ²; a smooth signal
 /// contributes `y'' dt²`, negligible at logger rates). An RMS rather than a median, because
 /// quantisation (ADC, encoder) shows as sparse jumps of one step whose median is 0. Floored at
-/// 1e-9 of the signal's range so that exact data still gives finite weights. Unit of `y`.
+/// [`noise_floor`], so that exact data still gives finite weights. Unit of `y`.
 pub fn noise_std(y: &[f64]) -> f64 {
     let mut d2: Vec<f64> = y
         .windows(3)
         .map(|w| (w[2] - 2.0 * w[1] + w[0]).powi(2))
         .collect();
-    let (lo, hi) = y
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
-            (lo.min(v), hi.max(v))
-        });
-    let floor = 1e-9 * (hi - lo).abs().max(f64::MIN_POSITIVE);
+    let floor = noise_floor(y);
     if d2.is_empty() {
         return floor;
     }
@@ -231,11 +226,43 @@ pub fn noise_std(y: &[f64]) -> f64 {
     (mean_sq.sqrt() / 6f64.sqrt()).max(floor)
 }
 
+/// Smallest noise level a channel is given, as a fraction of the channel's range: finer than a
+/// 23-bit reading of the signal's own span, so no real sensor is weighted above its worth.
+/// Exact columns (an encoder angle written at full double precision, an ideal record) show a
+/// scatter of 1e-12 of their range or less; weighted by it, the information on a direction the
+/// other channels leave nearly free (the voltage scale, exactly degenerate with scaling all six
+/// parameters) reaches 1e23 and the joint covariance loses the prior that bounds it below double
+/// precision: `R 0.3001839 [0.3001832, 0.3001846]` on a noise-free 10-bit pair whose truth is 0.3.
+/// With the floor at 1e-9 of the range that pair still claimed ±5e-6; from 1e-7 to 1e-4 its
+/// intervals no longer depend on the floor (±1.4e-4, set by the voltage levels and then widened
+/// by [`crate::input_uncertainty::pooled_level_variance`] to ±2.0e-4).
+const NOISE_FLOOR_FRACTION: f64 = 1e-7;
+
+/// [`NOISE_FLOOR_FRACTION`] of the range of `y` (unit of `y`; the smallest positive number for a
+/// constant signal).
+pub(crate) fn noise_floor(y: &[f64]) -> f64 {
+    let (lo, hi) = y
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        });
+    NOISE_FLOOR_FRACTION * (hi - lo).abs().max(f64::MIN_POSITIVE)
+}
+
+/// The noise level a channel of level `sigma` and floor `floor` ([`noise_floor`]) is given in
+/// the second stage of a fit, from its residual RMS `rms` at the first solution: `rms`, not
+/// below the floor; `None` (kept) when `rms` is not finite or the channel fits to rounding.
+pub(crate) fn reweighted_sigma(sigma: f64, floor: f64, rms: f64) -> Option<f64> {
+    (rms.is_finite() && rms > 1e3 * sigma * f64::EPSILON.sqrt()).then(|| rms.max(floor))
+}
+
 /// A channel's data and weight.
 struct ChannelData {
     kind: Channel,
     data: Vec<f64>,
     sigma: f64,
+    /// The smallest `sigma` may become ([`noise_floor`] of the fitted samples).
+    floor: f64,
     /// Samples left out of the fit (`true`), if any.
     exclude: Option<Vec<bool>>,
     /// The ADC step of a current or tachometer channel read without noise
@@ -266,6 +293,7 @@ impl ChannelData {
         };
         ChannelData {
             kind,
+            floor: noise_floor(fitted),
             data,
             sigma,
             exclude,
@@ -491,7 +519,9 @@ impl FullProblem {
 
 impl NuisanceProblem for FullProblem {
     fn nuisances(&self) -> Vec<Nuisance> {
-        self.nuisance_slots()
+        let slots = self.nuisance_slots();
+        let levels = slots.iter().filter(|(_, slot)| *slot == 0).count();
+        slots
             .into_iter()
             .map(|(k, slot)| {
                 let w = &self.tests[k];
@@ -500,7 +530,11 @@ impl NuisanceProblem for FullProblem {
                     Nuisance {
                         value: w.volts,
                         prior_mean: volts,
-                        prior_variance: u.volts_variance_v2,
+                        prior_variance: pooled_level_variance(
+                            u.volts_variance_v2,
+                            u.volts_bias_variance_v2,
+                            levels,
+                        ),
                         step: VOLTS_DIFF_STEP * volts.abs().max(1e-3),
                     }
                 } else if slot == 2 {
@@ -744,8 +778,9 @@ pub fn identify_full_with_inputs(
 pub(crate) trait WeightedProblem: LeastSquares {
     /// How θ maps to the motor and its effects.
     fn parameters(&self) -> &Parameters;
-    /// The noise level of every channel, in a fixed order.
-    fn sigmas_mut(&mut self) -> Vec<&mut f64>;
+    /// The noise level of every channel, in a fixed order, with the smallest it may become
+    /// ([`noise_floor`]).
+    fn sigmas_mut(&mut self) -> Vec<(&mut f64, f64)>;
     /// Whether [`fit_weighted_point`] reweights each channel by its own residual at the first
     /// solution (the default); `false` when the noise levels were given and are kept.
     fn reweights(&self) -> bool {
@@ -788,9 +823,9 @@ pub(crate) fn fit_weighted_point<P: WeightedProblem>(
     {
         let rms = problem.channel_quality(&first.params);
         let mut changed = false;
-        for (sigma, q) in problem.sigmas_mut().into_iter().zip(&rms) {
-            if q.rms_residual > 1e3 * *sigma * f64::EPSILON.sqrt() && q.rms_residual.is_finite() {
-                *sigma = q.rms_residual;
+        for ((sigma, floor), q) in problem.sigmas_mut().into_iter().zip(&rms) {
+            if let Some(s) = reweighted_sigma(*sigma, floor, q.rms_residual) {
+                *sigma = s;
                 changed = true;
             }
         }
@@ -976,10 +1011,10 @@ impl WeightedProblem for FullProblem {
         out.into_iter().flatten().collect()
     }
 
-    fn sigmas_mut(&mut self) -> Vec<&mut f64> {
+    fn sigmas_mut(&mut self) -> Vec<(&mut f64, f64)> {
         self.tests
             .iter_mut()
-            .flat_map(|w| w.channels.iter_mut().map(|c| &mut c.sigma))
+            .flat_map(|w| w.channels.iter_mut().map(|c| (&mut c.sigma, c.floor)))
             .collect()
     }
 

@@ -99,6 +99,10 @@ pub struct LevelEstimate {
     /// Variance of `volts` \[V²\]: from the noise (`s²/n`), the quantisation bias, or the
     /// censored fit at a rail.
     pub variance_v2: f64,
+    /// The part of `variance_v2` that is the quantiser's bias \[V²\]: fixed by where the level
+    /// sits between codes, not by the noise, so it need not average out over several levels
+    /// ([`pooled_level_variance`]); 0 for an unquantised level and one fitted at a rail.
+    pub bias_variance_v2: f64,
 }
 
 /// The level of `samples` (one constant voltage) recorded on `scale`.
@@ -129,6 +133,7 @@ pub fn estimate_level(samples: &[f64], scale: &VoltageScale) -> Option<LevelEsti
         return Some(LevelEstimate {
             volts: mean,
             variance_v2: s2 / nf,
+            bias_variance_v2: 0.0,
         });
     };
     let (lo, hi) = samples
@@ -155,14 +160,34 @@ pub fn estimate_level(samples: &[f64], scale: &VoltageScale) -> Option<LevelEsti
             return Some(LevelEstimate {
                 volts: lo + mu * q,
                 variance_v2: var * q * q,
+                bias_variance_v2: 0.0,
             });
         }
     }
     let sigma2 = (s2 - q * q / 12.0).max(0.0);
+    let bias = quantisation_bias_variance(sigma2.sqrt(), q);
     Some(LevelEstimate {
         volts: mean,
-        variance_v2: s2 / nf + quantisation_bias_variance(sigma2.sqrt(), q),
+        variance_v2: s2 / nf + bias,
+        bias_variance_v2: bias,
     })
+}
+
+/// Prior variance \[V²\] given to one of `m` uncertain levels of a fit whose variance is
+/// `variance` with quantiser-bias part `bias` ([`LevelEstimate::bias_variance_v2`]): the bias
+/// counted `m` times.
+///
+/// The noise in the levels is independent; their quantiser biases are not: without noise the
+/// bias is a function of where each level sits between codes, and levels that sit alike read
+/// alike — the paper's pair does, 40 V on 0–48 V and 2.5 V on 0–3 V both falling halfway
+/// between codes, so both read ½ step high and the common voltage scale, exactly degenerate with
+/// scaling all six parameters, was off by √3 standard deviations of each level while the two
+/// taken as independent claimed √2 less: `R 0.30018 [0.30004, 0.30032]`, truth 0.3. Whatever
+/// their correlation, `Var(Σ aₖbₖ) ≤ (Σ|aₖ|σₖ)² ≤ m Σ aₖ²σₖ²` (Cauchy–Schwarz): the biases
+/// taken as independent with `m` times their variance bound every combination of them the fit
+/// can use — exactly so for levels that share one code (the segments of a two-level PRBS).
+pub(crate) fn pooled_level_variance(variance: f64, bias: f64, m: usize) -> f64 {
+    variance + m.saturating_sub(1) as f64 * bias.clamp(0.0, variance.max(0.0))
 }
 
 /// Variance over the level's unknown place between codes of a quantiser's bias with Gaussian
@@ -340,6 +365,8 @@ fn censored_fit(counts: &[f64], low_rail: bool, high_rail: bool) -> Option<(f64,
 pub struct StepInputs {
     /// Variance of the step height \[V²\] ([`LevelEstimate::variance_v2`]).
     pub volts_variance_v2: f64,
+    /// Its quantiser-bias part \[V²\] ([`LevelEstimate::bias_variance_v2`]).
+    pub volts_bias_variance_v2: f64,
     /// Expected time from the step instant to the test's first sample \[s\], added to its
     /// `t_first`: `dt/2` for a step that falls anywhere in the sample period before the first
     /// sample at the new level.
@@ -362,6 +389,7 @@ impl StepInputs {
     pub fn sampled(level: LevelEstimate, dt_s: f64) -> Self {
         StepInputs {
             volts_variance_v2: level.variance_v2,
+            volts_bias_variance_v2: level.bias_variance_v2,
             delay_s: 0.5 * dt_s,
             delay_variance_s2: dt_s * dt_s / 12.0,
             current_lsb_a: 0.0,
@@ -398,6 +426,8 @@ pub(crate) fn settled_current(current: &[f64], lsb: f64) -> Option<(usize, f64)>
 pub struct LevelPrior {
     /// Variance of the level \[V²\].
     pub volts_variance_v2: f64,
+    /// Its quantiser-bias part \[V²\] ([`LevelEstimate::bias_variance_v2`]).
+    pub volts_bias_variance_v2: f64,
     /// Variance of the instant the level starts \[s²\] (0 for a level that starts the record).
     pub start_variance_s2: f64,
 }

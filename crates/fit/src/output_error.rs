@@ -24,12 +24,13 @@ use rayon::prelude::*;
 
 use crate::error::FitError;
 use crate::full_model::{
-    noise_std, quality_from_sums, Channel, ChannelQuality, FittedChannel, FullFit, WeightedProblem,
+    noise_floor, noise_std, quality_from_sums, Channel, ChannelQuality, FittedChannel, FullFit,
+    WeightedProblem,
 };
 use crate::initial_state::{FittedInitialState, InitialState};
 use crate::input_uncertainty::{
     estimate_level, fit_with_inputs, grid_phase_score_covariance, noise_free_quantum,
-    LevelEstimate, LevelPrior, Nuisance, NuisanceProblem, VoltageScale,
+    pooled_level_variance, LevelEstimate, LevelPrior, Nuisance, NuisanceProblem, VoltageScale,
 };
 use crate::lm::{half_squared_norm, LeastSquares, LmSettings, NormalEquations};
 use crate::mechanical::{
@@ -177,6 +178,7 @@ fn rebuild_voltage(
         let level = estimate_level(seg, &scale).unwrap_or(LevelEstimate {
             volts: mean,
             variance_v2: 0.0,
+            bias_variance_v2: 0.0,
         });
         let (start, start_variance_s2) = if s == 0 {
             (0.0, 0.0)
@@ -187,6 +189,7 @@ fn rebuild_voltage(
         steps.push((start, level.volts));
         priors.push(LevelPrior {
             volts_variance_v2: level.variance_v2,
+            volts_bias_variance_v2: level.bias_variance_v2,
             start_variance_s2,
         });
     }
@@ -202,6 +205,8 @@ struct OeChannel {
     /// Measured values at `keep`.
     data: Vec<f64>,
     sigma: f64,
+    /// The smallest `sigma` may become ([`crate::full_model::noise_floor`] of `data`).
+    floor: f64,
     /// One ADC step \[unit\] of a channel read without noise
     /// ([`crate::input_uncertainty::noise_free_quantum`]); `None` for a noisy or unquantised
     /// channel and for an encoder's speed (its errors are the encoder's, not an ADC's).
@@ -600,10 +605,10 @@ impl WeightedProblem for OeProblem {
         facts
     }
 
-    fn sigmas_mut(&mut self) -> Vec<&mut f64> {
+    fn sigmas_mut(&mut self) -> Vec<(&mut f64, f64)> {
         self.records
             .iter_mut()
-            .flat_map(|r| r.channels.iter_mut().map(|c| &mut c.sigma))
+            .flat_map(|r| r.channels.iter_mut().map(|c| (&mut c.sigma, c.floor)))
             .collect()
     }
 
@@ -824,6 +829,7 @@ fn prepare(k: usize, rec: &ExcitedRecord<'_>) -> Result<OeRecord, FitError> {
         OeChannel {
             kind,
             sigma: noise_std(&data),
+            floor: noise_floor(&data),
             noise_free_quantum,
             keep,
             data,
@@ -1054,7 +1060,9 @@ impl OeProblem {
 
 impl NuisanceProblem for OeProblem {
     fn nuisances(&self) -> Vec<Nuisance> {
-        self.nuisance_slots()
+        let slots = self.nuisance_slots();
+        let levels = slots.iter().filter(|(_, _, slot)| *slot == 0).count();
+        slots
             .into_iter()
             .filter_map(|(k, j, slot)| {
                 let rec = &self.records[k];
@@ -1066,7 +1074,11 @@ impl NuisanceProblem for OeProblem {
                     Nuisance {
                         value: volts[j],
                         prior_mean: v0,
-                        prior_variance: p.volts_variance_v2,
+                        prior_variance: pooled_level_variance(
+                            p.volts_variance_v2,
+                            p.volts_bias_variance_v2,
+                            levels,
+                        ),
                         step: LEVEL_DIFF_STEP * v0.abs().max(1e-3),
                     }
                 } else {

@@ -17,6 +17,8 @@ pub struct StepLocation {
     pub volts: f64,
     /// Variance of `volts` \[V²\] (noise, quantisation, rail).
     pub volts_variance_v2: f64,
+    /// Its quantiser-bias part \[V²\] ([`crate::LevelEstimate::bias_variance_v2`]).
+    pub volts_bias_variance_v2: f64,
     /// Sample period \[s\].
     pub dt: f64,
     /// Time of the step \[s\] (the first sample at the new level).
@@ -42,10 +44,12 @@ impl StepLocation {
         let level = crate::LevelEstimate {
             volts: self.volts,
             variance_v2: self.volts_variance_v2,
+            bias_variance_v2: self.volts_bias_variance_v2,
         };
         if self.index == 0 {
             StepInputs {
                 volts_variance_v2: level.variance_v2,
+                volts_bias_variance_v2: level.bias_variance_v2,
                 ..StepInputs::default()
             }
         } else {
@@ -139,6 +143,7 @@ pub fn locate_step_with(
         index,
         volts: level.volts,
         volts_variance_v2: level.variance_v2,
+        volts_bias_variance_v2: level.bias_variance_v2,
         dt,
         t_step: t[index],
         fall,

@@ -108,10 +108,9 @@ fn sub_sample_step_instant_is_found_from_the_records() {
     let tests = [test_of(&hv, rate), test_of(&lv, rate)];
     let paper = identify_paper(&tests[0], &tests[1], LmSettings::default()).unwrap();
     let inputs = fit::StepInputs {
-        volts_variance_v2: 0.0,
         delay_s: 0.5e-3,
         delay_variance_s2: 1e-6 / 12.0,
-        current_lsb_a: 0.0,
+        ..Default::default()
     };
     let worst = |fit: &fit::FullFit| {
         fit.params
