@@ -9,6 +9,7 @@
 
 mod args;
 mod commands;
+mod fifo;
 mod figures;
 mod output;
 mod paper_values;

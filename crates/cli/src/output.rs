@@ -85,9 +85,7 @@ pub fn write_with(path: &Path, body: impl FnOnce(&mut dyn Write) -> Result<()>) 
                 .context("cannot write to standard output")
         }
         Target::Direct(file) => {
-            let file = OpenOptions::new()
-                .write(true)
-                .open(&file)
+            let file = crate::fifo::open_write(&file)
                 .with_context(|| format!("cannot open {}", path.display()))?;
             let mut out = BufWriter::new(file);
             body(&mut out)
@@ -150,7 +148,7 @@ fn resolve(path: &Path) -> std::result::Result<Target, String> {
             }
         };
         if kind.is_symlink() {
-            if is_descriptor(&at) {
+            if crate::fifo::is_descriptor(&at) {
                 writable(&at)?;
                 return Ok(Target::Direct(at));
             }
@@ -176,14 +174,6 @@ fn resolve(path: &Path) -> std::result::Result<Target, String> {
     Err(format!(
         "more than {MAX_LINKS} symbolic links to follow (a loop?)"
     ))
-}
-
-/// `/dev/fd/N`, `/proc/self/fd/N`, `/proc/PID/fd/N`: a link naming an open descriptor (a pipe,
-/// a terminal), which must be opened as such, not followed by name.
-fn is_descriptor(path: &Path) -> bool {
-    path.parent().is_some_and(|fd| {
-        fd == Path::new("/dev/fd") || (fd.ends_with("fd") && fd.starts_with("/proc"))
-    })
 }
 
 #[cfg(unix)]

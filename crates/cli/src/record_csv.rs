@@ -1,7 +1,6 @@
 //! Records in the CSV contract of SPEC section 4: reading them with errors that name the file
 //! and line, and writing them (through [`crate::output`]).
 
-use std::fs::File;
 use std::io::{BufRead, Write};
 use std::path::Path;
 
@@ -626,7 +625,8 @@ fn parse_header(
 /// Reads a CSV file as a [`Table`]; every problem is a [`BadInput`] naming file and line.
 pub fn read_table(path: &Path) -> Result<Table> {
     let shown = path.display();
-    let file = File::open(path).map_err(|e| BadInput(format!("{shown}: cannot read ({e})")))?;
+    let file = crate::fifo::open_read(path)
+        .map_err(|e| BadInput(format!("{shown}: cannot read ({e})")))?;
     if file.metadata().is_ok_and(|m| m.is_dir()) {
         return Err(BadInput(format!("{shown}: a directory, not a record file")).into());
     }

@@ -18,7 +18,7 @@ const MAX_SETTINGS_BYTES: u64 = 1 << 20;
 /// why it cannot be read (an I/O error, not UTF-8, too large).
 pub fn read_settings_file(path: &Path) -> std::result::Result<String, String> {
     use std::io::Read;
-    let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
+    let file = crate::fifo::open_read(path).map_err(|e| e.to_string())?;
     let mut text = String::new();
     file.take(MAX_SETTINGS_BYTES + 1)
         .read_to_string(&mut text)

@@ -356,3 +356,61 @@ fn bad_output_paths_are_refused_before_any_work() {
     }
     assert_eq!(std::fs::read_to_string(&file).unwrap(), "not a folder\n");
 }
+
+/// Spawns `motorid args` with stderr piped and returns the child with the first line it
+/// writes there, read within ten seconds (`None` if none came).
+fn spawn_with_first_error_line(args: &[&str]) -> (std::process::Child, Option<String>) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_motorid"))
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the motorid binary runs");
+    let err = child.stderr.take().expect("piped stderr");
+    let (sent, received) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let mut err = std::io::BufReader::new(err);
+        let mut line = String::new();
+        let _ = std::io::BufRead::read_line(&mut err, &mut line);
+        let _ = sent.send(line);
+        // Drained to the end: a closed pipe would stop the child at its next line.
+        let _ = std::io::copy(&mut err, &mut std::io::sink());
+    });
+    (child, received.recv_timeout(Duration::from_secs(10)).ok())
+}
+
+#[test]
+fn a_fifo_nobody_opens_is_announced_not_silently_waited_on() {
+    // `simulate -o FIFO` with no reader, and `identify --record FIFO` with no writer, waited
+    // in open() without a word: to a user, a hang.
+    let dir = scratch("fifo-wait");
+    let fifo = dir.join("fifo");
+    // SAFETY: a valid NUL-terminated path.
+    assert_eq!(unsafe { libc::mkfifo(c_path(&fifo).as_ptr(), 0o644) }, 0);
+    let path = fifo.to_str().unwrap();
+    let (mut writer, line) =
+        spawn_with_first_error_line(&["simulate", "--voltage", "1", "--duration", "1", "-o", path]);
+    let line = line.unwrap_or_default();
+    assert!(
+        line.contains("waiting for a program to read it"),
+        "{line:?}"
+    );
+    // The wait ends when a reader comes, and the record arrives whole.
+    let text = std::fs::read_to_string(&fifo).unwrap();
+    assert!(writer.wait().unwrap().success());
+    assert_record(&text, 1.0);
+
+    let (mut reader, line) = spawn_with_first_error_line(&["identify", "--record", path]);
+    let line = line.unwrap_or_default();
+    assert!(
+        line.contains("waiting for a program to write to it"),
+        "{line:?}"
+    );
+    std::fs::write(&fifo, &text).unwrap();
+    let status = reader.wait().unwrap();
+    // Read as the same record in a file is.
+    let file = dir.join("record.csv");
+    std::fs::write(&file, &text).unwrap();
+    let from_file = motorid(&["identify", "--record", file.to_str().unwrap()]);
+    assert_eq!(status.code(), from_file.status.code(), "{}", stderr(&from_file));
+}
