@@ -412,5 +412,10 @@ fn a_fifo_nobody_opens_is_announced_not_silently_waited_on() {
     let file = dir.join("record.csv");
     std::fs::write(&file, &text).unwrap();
     let from_file = motorid(&["identify", "--record", file.to_str().unwrap()]);
-    assert_eq!(status.code(), from_file.status.code(), "{}", stderr(&from_file));
+    assert_eq!(
+        status.code(),
+        from_file.status.code(),
+        "{}",
+        stderr(&from_file)
+    );
 }
