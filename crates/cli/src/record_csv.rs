@@ -645,6 +645,19 @@ fn parse_bytes(bytes: &[u8]) -> std::result::Result<Table, (usize, String)> {
 /// The conditioning ranges `[lo, hi]` of voltage, current and speed stated in the metadata, with
 /// half an ADC step as tolerance: `# measurement:` as `motorid simulate` writes it, or
 /// `# range_voltage: LO,HI` (likewise `range_current`, `range_speed`).
+/// Whether the record's metadata says it was measured without an ADC (`motorid simulate`'s
+/// ideal records, or a measurement model with no ADC): nothing in it can sit on a rail. Its
+/// steady values are then exact and repeat for as long as they hold — a current settled at
+/// E/R for the last quarter of a record looked clipped, and a step below breakaway was
+/// refused as "25 % of the current on an ADC rail".
+fn metadata_says_no_adc(table: &Table) -> bool {
+    table.meta("measurement").is_some_and(|text| {
+        text == crate::simulated::IDEAL_MEASUREMENT
+            || serde_json::from_str::<motor_model::MeasurementModel>(text)
+                .is_ok_and(|m| m.adc.is_none())
+    })
+}
+
 fn metadata_rails(table: &Table) -> [Option<([f64; 2], f64)>; 3] {
     let mut out = [None; 3];
     if let Some(m) = table
@@ -873,6 +886,7 @@ fn to_record(
     };
     check_unit_plausibility(&table, &|name| find(&table, name), &record)?;
     let rails = metadata_rails(&table);
+    let no_adc = metadata_says_no_adc(&table);
     let masks: [Vec<bool>; 3] = std::array::from_fn(|c| {
         // With a position column the fits take the speed from the encoder (no ADC), so a
         // speed column beside it is not checked.
@@ -882,6 +896,7 @@ fn to_record(
             _ => record.speed.as_ref().filter(|_| record.position.is_none()),
         };
         match col {
+            Some(y) if !y.is_empty() && no_adc && rails[c].is_none() => vec![false; y.len()],
             Some(y) if !y.is_empty() => {
                 let (r, tol) = rails[c].map_or((None, 0.0), |(r, tol)| (Some(r), tol));
                 fit::find_clipping(y, r, tol)

@@ -145,13 +145,22 @@ pub fn record_grid(duration_s: f64, rate_hz: f64) -> Result<(f64, f64)> {
     let rate_hz = rate("--rate", rate_hz)?;
     let samples = (duration_s * rate_hz).floor() + 1.0;
     if samples > motor_model::MAX_SAMPLES as f64 {
+        // The largest whole rate that fits, when there is one (a rate rounded down to 0 Hz
+        // would be refused in turn).
+        let fitting = (motor_model::MAX_SAMPLES - 1) as f64;
+        let lower_rate = (fitting / duration_s).floor();
+        let advice = if lower_rate >= 1.0 {
+            format!(" or lower the rate (e.g. --rate {lower_rate})")
+        } else {
+            String::new()
+        };
         return Err(BadInput(format!(
-            "--duration {} at --rate {}: {} samples; at most {} fit in memory: shorten the record or lower the rate (e.g. --rate {})",
+            "--duration {} at --rate {}: {} samples; at most {} fit in memory: shorten the record (at most --duration {} at this rate){advice}",
             shown(duration_s),
             shown(rate_hz),
             shown(samples),
             motor_model::MAX_SAMPLES,
-            ((motor_model::MAX_SAMPLES - 1) as f64 / duration_s).floor()
+            shown(fitting / rate_hz),
         ))
         .into());
     }

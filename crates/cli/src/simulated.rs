@@ -133,6 +133,9 @@ pub fn record_at(
     Ok(step)
 }
 
+/// The `measurement` metadata of a record simulated without ADC, noise or encoder.
+pub const IDEAL_MEASUREMENT: &str = "ideal (exact values)";
+
 /// Metadata lines describing a simulated record.
 pub fn metadata(motor: &MotorParams, effects: &Effects, input: &Input) -> Vec<(String, String)> {
     let input_text = match input {

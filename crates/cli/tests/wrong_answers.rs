@@ -4,8 +4,8 @@
 mod common;
 
 use common::{
-    assert_truth_in_intervals, interval, motorid, scratch, simulate_to, small_servo_steps, stderr,
-    stdout, LOGGER, PAPER_TRUTH as TRUTH, SMALL_SERVO_TRUTH,
+    assert_bad_input, assert_truth_in_intervals, interval, motorid, scratch, simulate_to,
+    small_servo_steps, stderr, stdout, LOGGER, PAPER_TRUTH as TRUTH, SMALL_SERVO_TRUTH,
 };
 use serde_json::Value;
 
@@ -305,4 +305,79 @@ fn logger_pairs_shorter_than_their_settling_identify_the_motor() {
         );
         assert_truth_in_intervals(&v, &TRUTH);
     }
+}
+
+/// `path` with the column `column` (0-based) of every data row negated.
+fn negate_column(from: &std::path::Path, to: &std::path::Path, column: usize) {
+    let text = std::fs::read_to_string(from).unwrap();
+    let mut out = String::new();
+    for line in text.lines() {
+        if line.starts_with('#') || line.starts_with('t') {
+            out.push_str(line);
+        } else {
+            let fields: Vec<String> = line
+                .split(',')
+                .enumerate()
+                .map(|(i, f)| {
+                    if i == column {
+                        format!("{}", -f.parse::<f64>().unwrap())
+                    } else {
+                        f.to_string()
+                    }
+                })
+                .collect();
+            out.push_str(&fields.join(","));
+        }
+        out.push('\n');
+    }
+    std::fs::write(to, out).unwrap();
+}
+
+#[test]
+fn refusals_name_the_real_cause() {
+    let dir = scratch("real-causes");
+    let p = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    // A step below breakaway on an ideal record: was "25 % of the current on an ADC rail"
+    // (the exact settled current repeats and looked clipped).
+    simulate_to(&dir.join("h.csv"), &["--voltage", "40"]);
+    simulate_to(&dir.join("l005.csv"), &["--voltage", "0.05"]);
+    assert_bad_input(
+        &["identify", "--high", &p("h.csv"), "--low", &p("l005.csv")],
+        "the rotor never moves: the 0.0500 V step does not break the Coulomb friction",
+    );
+    // A "step" of 0 V through a noisy ADC: was "the voltage steps more than once".
+    let mut args = LOGGER.to_vec();
+    args.extend_from_slice(&["--voltage", "40"]);
+    simulate_to(&dir.join("lh.csv"), &args);
+    let mut args = LOGGER.to_vec();
+    args.extend_from_slice(&["--voltage", "0"]);
+    simulate_to(&dir.join("l0.csv"), &args);
+    assert_bad_input(
+        &["identify", "--high", &p("lh.csv"), "--low", &p("l0.csv")],
+        "no step: the voltage stays within its noise",
+    );
+    // A current column of the wrong sign: was "R = -0.314: must be greater than zero".
+    let mut args = LOGGER.to_vec();
+    args.extend_from_slice(&["--voltage", "2.5"]);
+    simulate_to(&dir.join("ll.csv"), &args);
+    negate_column(&dir.join("lh.csv"), &dir.join("fh.csv"), 2);
+    negate_column(&dir.join("ll.csv"), &dir.join("fl.csv"), 2);
+    assert_bad_input(
+        &["identify", "--high", &p("fh.csv"), "--low", &p("fl.csv")],
+        "V step: its sign is reversed (negate the current column",
+    );
+    // The same for the encoder's angle.
+    negate_column(&dir.join("lh.csv"), &dir.join("ah.csv"), 4);
+    negate_column(&dir.join("ll.csv"), &dir.join("al.csv"), 4);
+    assert_bad_input(
+        &["identify", "--high", &p("ah.csv"), "--low", &p("al.csv")],
+        "the angle runs",
+    );
+    // A record too long for memory at any whole rate: suggested "--rate 0", itself refused.
+    assert_bad_input(
+        &["simulate", "--duration", "1e9", "-o", &p("x.csv")],
+        "shorten the record (at most --duration 9999.999 at this rate)",
+    );
+    let out = motorid(&["simulate", "--duration", "1e9", "-o", &p("x.csv")]);
+    assert!(!stderr(&out).contains("--rate 0"), "{}", stderr(&out));
 }

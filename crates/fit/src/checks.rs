@@ -144,9 +144,43 @@ pub fn check_step_test(label: &str, t: &StepTest<'_>) -> Result<(), FitError> {
         if check_settled_for(label, "current", t.current, t.dt, "").is_err() {
             return Err(bad(label, record_too_short(t.current, t.dt)));
         }
-        return Err(bad(label, format!("the rotor never moves: the {} V step does not break the Coulomb friction (|E| ≤ R Ts/k, Eq. (11)); raise the step voltage", t.volts)));
+        return Err(bad(label, format!("the rotor never moves: the {:.4} V step does not break the Coulomb friction (|E| ≤ R Ts/k, Eq. (11)); raise the step voltage", t.volts)));
     }
-    Ok(())
+    check_signs(label, t)
+}
+
+/// A motor stepped from rest draws current, and turns, in the direction of its voltage: at
+/// the end of the record `R I = E − k Ω` (Eq. (5)) with `0 ≤ k Ω < E`, so `I` has the sign of
+/// `E`, and so has `Ω` (the model's k > 0). A channel whose end reads clearly (beyond five
+/// times its noise) the other way is wired or counted in reverse; fitted as it is, the
+/// parameters come out negative ("R = −0.314 must be greater than zero") without a word on
+/// why.
+fn check_signs(label: &str, t: &StepTest<'_>) -> Result<(), FitError> {
+    let end = |y: &[f64]| {
+        let tail = &y[y.len() - (y.len() / 10).max(1)..];
+        tail.iter().sum::<f64>() / tail.len() as f64
+    };
+    let against = |y: &[f64]| {
+        let e = end(y);
+        e * t.volts < 0.0 && e.abs() > 5.0 * crate::full_model::noise_std(y)
+    };
+    if against(t.current) {
+        return Err(bad(label, format!("the current ends at {:.4} A against a {:.4} V step: its sign is reversed (negate the current column, or swap the current sensor's leads)", end(t.current), t.volts)));
+    }
+    let speed = match (t.position, t.speed) {
+        (Some(angle), _) => {
+            let moved = angle[angle.len() - 1] - angle[0];
+            (moved * t.volts < 0.0).then(|| format!("the angle runs {moved:.4} rad"))
+        }
+        (None, Some(speed)) => {
+            against(speed).then(|| format!("the speed ends at {:.4} rad/s", end(speed)))
+        }
+        (None, None) => None,
+    };
+    match speed {
+        Some(what) => Err(bad(label, format!("{what} against a {:.4} V step: its sign is reversed (negate the speed or position column, or count the encoder the other way)", t.volts))),
+        None => Ok(()),
+    }
 }
 
 /// Why a record whose current is still rising is too short, with the time the current needs

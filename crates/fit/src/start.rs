@@ -39,7 +39,7 @@ fn tail_mean(y: &[f64]) -> f64 {
 /// same way and by shrinking steps (`0 < (a₃ − a₂)/(a₂ − a₁) < 0.9`) by more than their noise;
 /// a paper-motor step recorded for 20 s (one mechanical time constant) read its steady speed
 /// 13 % low from the tail mean and the full fit started from it ended at L = 8e-87 H.
-fn steady_value(y: &[f64]) -> f64 {
+fn extrapolated_steady_value(y: &[f64]) -> f64 {
     let m = y.len() / 10;
     if m < 3 {
         return tail_mean(y);
@@ -68,8 +68,11 @@ pub fn steady_state_start(
     let (Some(wh), Some(wl)) = (high.speed, low.speed) else {
         return Err(bad("both tests need a speed (or position) channel".into()));
     };
-    let (ih, il) = (steady_value(high.current), steady_value(low.current));
-    let (oh, ol) = (steady_value(wh), steady_value(wl));
+    let (ih, il) = (
+        extrapolated_steady_value(high.current),
+        extrapolated_steady_value(low.current),
+    );
+    let (oh, ol) = (extrapolated_steady_value(wh), extrapolated_steady_value(wl));
     // The start reads steady values off the records' ends: where it fails, a record that has
     // not settled is the likelier cause, and the one to name.
     let unsettled = || {

@@ -104,6 +104,17 @@ pub fn locate_step_with(
             format!("the voltage settles at {end} V: no step found (is the voltage column right?)"),
         ));
     }
+    // A record at 0 V whose noise is all there is: its "step" would be the noise's peak, and
+    // the noise would then read as the voltage stepping many times.
+    let noise = crate::full_model::noise_std(voltage);
+    if level.abs() < 10.0 * noise {
+        return Err(bad(
+            "voltage",
+            format!(
+                "no step: the voltage stays within its noise ({noise:.2e} V RMS; largest reading {level:.4} V) — a step test needs a step well above it (is the voltage column right, or was the supply off?)"
+            ),
+        ));
+    }
     let high = |v: f64| v * level.signum() >= 0.5 * level.abs();
     let index = voltage.iter().position(|&v| high(v)).unwrap_or(0);
     let fall = voltage

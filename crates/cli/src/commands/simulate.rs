@@ -231,7 +231,7 @@ pub fn run(a: &Settings) -> Result<()> {
     meta.push((
         "measurement".into(),
         if ideal {
-            "ideal (exact values)".into()
+            crate::simulated::IDEAL_MEASUREMENT.into()
         } else {
             serde_json::to_string(&measurement).unwrap_or_default()
         },
