@@ -104,17 +104,6 @@ pub fn locate_step_with(
             format!("the voltage settles at {end} V: no step found (is the voltage column right?)"),
         ));
     }
-    // A record at 0 V whose noise is all there is: its "step" would be the noise's peak, and
-    // the noise would then read as the voltage stepping many times.
-    let noise = crate::full_model::noise_std(voltage);
-    if level.abs() < 10.0 * noise {
-        return Err(bad(
-            "voltage",
-            format!(
-                "no step: the voltage stays within its noise ({noise:.2e} V RMS; largest reading {level:.4} V) — a step test needs a step well above it (is the voltage column right, or was the supply off?)"
-            ),
-        ));
-    }
     let high = |v: f64| v * level.signum() >= 0.5 * level.abs();
     let index = voltage.iter().position(|&v| high(v)).unwrap_or(0);
     let fall = voltage
@@ -126,6 +115,22 @@ pub fn locate_step_with(
     // A step that comes back down is one step only if it holds in between.
     let dip = fall.and_then(|_| voltage[index..step_end].iter().position(|&v| !high(v)));
     if let Some(dip) = dip {
+        // Mostly below half the "step" between its first and last samples above it: no step
+        // but the noise of a voltage at 0, whose peaks were taken for one.
+        let above = voltage[index..step_end]
+            .iter()
+            .filter(|&&v| high(v))
+            .count();
+        if 2 * above < step_end - index {
+            return Err(bad(
+                "voltage",
+                format!(
+                    "no step: the voltage stays within its noise ({:.2e} V RMS; largest reading {level:.4} V, and only {above} of the {} samples from the first to the last reading above half of it) — a step test needs a step well above the noise (is the voltage column right, or was the supply off?)",
+                    crate::full_model::noise_std(voltage),
+                    step_end - index
+                ),
+            ));
+        }
         return Err(bad(
             "voltage",
             format!(
