@@ -345,21 +345,18 @@ fn refusals_name_the_real_cause() {
         &["identify", "--high", &p("h.csv"), "--low", &p("l005.csv")],
         "the rotor never moves: the 0.0500 V step does not break the Coulomb friction",
     );
+    // Logger records of these step voltages.
+    for (name, volts) in [("lh.csv", "40"), ("l0.csv", "0"), ("ll.csv", "2.5")] {
+        let mut args = LOGGER.to_vec();
+        args.extend_from_slice(&["--voltage", volts]);
+        simulate_to(&dir.join(name), &args);
+    }
     // A "step" of 0 V through a noisy ADC: was "the voltage steps more than once".
-    let mut args = LOGGER.to_vec();
-    args.extend_from_slice(&["--voltage", "40"]);
-    simulate_to(&dir.join("lh.csv"), &args);
-    let mut args = LOGGER.to_vec();
-    args.extend_from_slice(&["--voltage", "0"]);
-    simulate_to(&dir.join("l0.csv"), &args);
     assert_bad_input(
         &["identify", "--high", &p("lh.csv"), "--low", &p("l0.csv")],
         "no step: the voltage stays within its noise",
     );
     // A current column of the wrong sign: was "R = -0.314: must be greater than zero".
-    let mut args = LOGGER.to_vec();
-    args.extend_from_slice(&["--voltage", "2.5"]);
-    simulate_to(&dir.join("ll.csv"), &args);
     negate_column(&dir.join("lh.csv"), &dir.join("fh.csv"), 2);
     negate_column(&dir.join("ll.csv"), &dir.join("fl.csv"), 2);
     assert_bad_input(

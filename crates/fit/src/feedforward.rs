@@ -27,7 +27,7 @@ use crate::error::FitError;
 use crate::full_model::{
     noise_floor, noise_std, quality_from_sums, reweighted_sigma, Channel, ChannelQuality,
 };
-use crate::input_uncertainty::{pooled_level_variance, LevelPrior};
+use crate::input_uncertainty::{bias_group_sizes, pooled_level_variance, LevelPrior};
 use crate::lm::{
     half_squared_norm, solve, LeastSquares, LmReport, LmSettings, NormalEquations, Termination,
 };
@@ -783,11 +783,23 @@ pub fn identify_feedforward(
     let mut positions = Vec::with_capacity(records.len());
     let mut free = 0usize;
     let mut nuisances = 0usize;
-    let uncertain_levels = records
-        .iter()
-        .flat_map(|r| r.priors)
-        .filter(|q| q.volts_variance_v2 > 0.0)
-        .count();
+    // Every record's levels in order, with how many read the same code.
+    let groups = bias_group_sizes(
+        &records
+            .iter()
+            .flat_map(|r| r.priors)
+            .map(|q| {
+                let uncertain = q.volts_variance_v2 > 0.0;
+                let bias = if uncertain {
+                    q.volts_bias_variance_v2
+                } else {
+                    0.0
+                };
+                (bias, q.volts_bias_code)
+            })
+            .collect::<Vec<_>>(),
+    );
+    let mut group = groups.into_iter();
     for (k, rec) in records.iter().enumerate() {
         let label = format!("record {}", k + 1);
         if !(rec.dt.is_finite() && rec.dt > 0.0) {
@@ -879,7 +891,7 @@ pub fn identify_feedforward(
                             volts_sd: pooled_level_variance(
                                 q.volts_variance_v2,
                                 q.volts_bias_variance_v2,
-                                uncertain_levels,
+                                group.next().unwrap_or(1),
                             )
                             .max(0.0)
                             .sqrt(),

@@ -14,8 +14,8 @@ use nalgebra::{DMatrix, DVector};
 use crate::error::FitError;
 use crate::initial_state::FittedInitialState;
 use crate::input_uncertainty::{
-    fit_with_inputs, grid_phase_score_covariance, noise_free_quantum, pooled_level_variance,
-    settled_current, Nuisance, NuisanceProblem, StepInputs,
+    bias_group_sizes, fit_with_inputs, grid_phase_score_covariance, noise_free_quantum,
+    pooled_level_variance, settled_current, Nuisance, NuisanceProblem, StepInputs,
 };
 use crate::lm::{solve, LeastSquares, LmSettings, NormalEquations, Termination};
 use crate::parameters::{names_of, units_of, EffectEstimate, Parameters, MOTOR};
@@ -520,7 +520,26 @@ impl FullProblem {
 impl NuisanceProblem for FullProblem {
     fn nuisances(&self) -> Vec<Nuisance> {
         let slots = self.nuisance_slots();
-        let levels = slots.iter().filter(|(_, slot)| *slot == 0).count();
+        let level_tests: Vec<usize> = slots
+            .iter()
+            .filter(|(_, slot)| *slot == 0)
+            .map(|(k, _)| *k)
+            .collect();
+        let groups = bias_group_sizes(
+            &level_tests
+                .iter()
+                .map(|&k| {
+                    let u = self.inputs[k].2;
+                    (u.volts_bias_variance_v2, u.volts_bias_code)
+                })
+                .collect::<Vec<_>>(),
+        );
+        let group_of = |k: usize| {
+            level_tests
+                .iter()
+                .position(|&t| t == k)
+                .map_or(1, |i| groups[i])
+        };
         slots
             .into_iter()
             .map(|(k, slot)| {
@@ -533,7 +552,7 @@ impl NuisanceProblem for FullProblem {
                         prior_variance: pooled_level_variance(
                             u.volts_variance_v2,
                             u.volts_bias_variance_v2,
-                            levels,
+                            group_of(k),
                         ),
                         step: VOLTS_DIFF_STEP * volts.abs().max(1e-3),
                     }

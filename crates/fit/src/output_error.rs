@@ -29,8 +29,9 @@ use crate::full_model::{
 };
 use crate::initial_state::{FittedInitialState, InitialState};
 use crate::input_uncertainty::{
-    estimate_level, fit_with_inputs, grid_phase_score_covariance, noise_free_quantum,
-    pooled_level_variance, LevelEstimate, LevelPrior, Nuisance, NuisanceProblem, VoltageScale,
+    bias_group_sizes, estimate_level, fit_with_inputs, grid_phase_score_covariance,
+    noise_free_quantum, pooled_level_variance, LevelEstimate, LevelPrior, Nuisance,
+    NuisanceProblem, VoltageScale,
 };
 use crate::lm::{half_squared_norm, LeastSquares, LmSettings, NormalEquations};
 use crate::mechanical::{
@@ -179,6 +180,7 @@ fn rebuild_voltage(
             volts: mean,
             variance_v2: 0.0,
             bias_variance_v2: 0.0,
+            bias_code: 0,
         });
         let (start, start_variance_s2) = if s == 0 {
             (0.0, 0.0)
@@ -190,6 +192,7 @@ fn rebuild_voltage(
         priors.push(LevelPrior {
             volts_variance_v2: level.variance_v2,
             volts_bias_variance_v2: level.bias_variance_v2,
+            volts_bias_code: level.bias_code,
             start_variance_s2,
         });
     }
@@ -1061,7 +1064,26 @@ impl OeProblem {
 impl NuisanceProblem for OeProblem {
     fn nuisances(&self) -> Vec<Nuisance> {
         let slots = self.nuisance_slots();
-        let levels = slots.iter().filter(|(_, _, slot)| *slot == 0).count();
+        let level_slots: Vec<(usize, usize)> = slots
+            .iter()
+            .filter(|(_, _, slot)| *slot == 0)
+            .map(|&(k, j, _)| (k, j))
+            .collect();
+        let groups = bias_group_sizes(
+            &level_slots
+                .iter()
+                .map(|&(k, j)| {
+                    let p = self.records[k].priors[j].2;
+                    (p.volts_bias_variance_v2, p.volts_bias_code)
+                })
+                .collect::<Vec<_>>(),
+        );
+        let group_of = |k: usize, j: usize| {
+            level_slots
+                .iter()
+                .position(|&s| s == (k, j))
+                .map_or(1, |i| groups[i])
+        };
         slots
             .into_iter()
             .filter_map(|(k, j, slot)| {
@@ -1077,7 +1099,7 @@ impl NuisanceProblem for OeProblem {
                         prior_variance: pooled_level_variance(
                             p.volts_variance_v2,
                             p.volts_bias_variance_v2,
-                            levels,
+                            group_of(k, j),
                         ),
                         step: LEVEL_DIFF_STEP * v0.abs().max(1e-3),
                     }

@@ -19,6 +19,8 @@ pub struct StepLocation {
     pub volts_variance_v2: f64,
     /// Its quantiser-bias part \[V²\] ([`crate::LevelEstimate::bias_variance_v2`]).
     pub volts_bias_variance_v2: f64,
+    /// The code the step height reads ([`crate::LevelEstimate::bias_code`]).
+    pub volts_bias_code: i64,
     /// Sample period \[s\].
     pub dt: f64,
     /// Time of the step \[s\] (the first sample at the new level).
@@ -45,11 +47,13 @@ impl StepLocation {
             volts: self.volts,
             variance_v2: self.volts_variance_v2,
             bias_variance_v2: self.volts_bias_variance_v2,
+            bias_code: self.volts_bias_code,
         };
         if self.index == 0 {
             StepInputs {
                 volts_variance_v2: level.variance_v2,
                 volts_bias_variance_v2: level.bias_variance_v2,
+                volts_bias_code: level.bias_code,
                 ..StepInputs::default()
             }
         } else {
@@ -160,6 +164,7 @@ pub fn locate_step_with(
         volts: level.volts,
         volts_variance_v2: level.variance_v2,
         volts_bias_variance_v2: level.bias_variance_v2,
+        volts_bias_code: level.bias_code,
         dt,
         t_step: t[index],
         fall,
