@@ -258,6 +258,9 @@ fn a_noise_free_adc_pair_with_an_exact_angle_column_is_not_overconfident() {
     // Exit 0 with R 0.3001839 [0.3001832, 0.3001846] (truth 0.3): the exact angle column made
     // the encoder speed's noise 1e-12 of its range, and 40 V on 0–48 V and 2.5 V on 0–3 V both
     // read half a step high, an error the two levels taken as independent halved.
+    // `simulate` no longer writes the exact angle beside ADC channels (no bench measures it):
+    // the angle of the ideal record of the same step is joined to the ADC's record, as a
+    // hand-made record could hold it.
     let dir = scratch("noise-free-pair");
     let (hv, lv) = (dir.join("h.csv"), dir.join("l.csv"));
     for (path, volts) in [(&hv, "40"), (&lv, "2.5")] {
@@ -265,6 +268,29 @@ fn a_noise_free_adc_pair_with_an_exact_angle_column_is_not_overconfident() {
             path,
             &["--voltage", volts, "--adc-bits", "10", "--noise-lsb", "0"],
         );
+        let measured = std::fs::read_to_string(path).unwrap();
+        assert!(
+            measured.contains("speed[rad/s]\n"),
+            "an exact angle was written"
+        );
+        let ideal = dir.join("ideal.csv");
+        simulate_to(&ideal, &["--voltage", volts]);
+        let ideal = std::fs::read_to_string(&ideal).unwrap();
+        let angles = ideal
+            .lines()
+            .filter(|l| !l.starts_with('#'))
+            .map(|l| l.rsplit(',').next().unwrap().to_string());
+        let rows = measured.lines().filter(|l| !l.starts_with('#'));
+        let mut joined: String = measured
+            .lines()
+            .filter(|l| l.starts_with('#'))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        for (row, angle) in rows.zip(angles) {
+            joined.push_str(&format!("{row},{angle}\n"));
+        }
+        assert!(joined.contains(",position[rad]\n"));
+        std::fs::write(path, joined).unwrap();
     }
     let (v, out) = json_of(&[
         "identify",

@@ -233,7 +233,7 @@ impl RecordFacts {
 
 /// Whether a measured speed shows the motor turning: its largest |value| stands above ten
 /// times its own noise level (an encoder at rest reads 0 exactly).
-fn shows_motion(speed: &[f64]) -> bool {
+pub(crate) fn shows_motion(speed: &[f64]) -> bool {
     let peak = speed.iter().fold(0.0f64, |m, w| m.max(w.abs()));
     peak > 0.0 && peak > 10.0 * crate::full_model::noise_std(speed)
 }

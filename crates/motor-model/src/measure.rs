@@ -108,7 +108,13 @@ pub struct MeasurementModel {
     /// Standard deviation of additive white noise on voltage \[V\], current \[A\] and tacho speed
     /// \[rad/s\], before quantisation.
     pub noise_std: [f64; 3],
-    /// Encoder counts per revolution after quadrature decoding, or `None` for the exact angle.
+    /// Encoder counts per revolution after quadrature decoding, or `None` for no encoder: an
+    /// ideal chain ([`MeasurementModel::is_ideal`]) then records the exact angle, any other no
+    /// angle at all. A record read through an ADC or with noise that carried the exact angle
+    /// beside its channels is no bench's record, and the fits would weight that angle far above
+    /// every measured channel: with a noise-free 10-bit ADC, `identify --record` put Ts 10 of
+    /// its half-widths from the truth on such a record, and was right once the angle came from
+    /// an encoder or the speed from the tachometer.
     pub encoder_counts_per_rev: Option<u32>,
     /// Source of the speed column.
     pub speed_source: SpeedSource,
@@ -148,6 +154,13 @@ pub struct Record {
 }
 
 impl MeasurementModel {
+    /// Whether the chain measures exactly: no ADC, no noise, no encoder (the exact angle).
+    pub fn is_ideal(&self) -> bool {
+        self.adc.is_none()
+            && self.noise_std.iter().all(|&s| s == 0.0)
+            && self.encoder_counts_per_rev.is_none()
+    }
+
     /// A data logger: a `bits`-bit ADC over `ranges` (voltage \[V\], current \[A\], tachometer
     /// \[rad/s\]) with `noise_lsb` LSB of white noise on each analog channel, an encoder of
     /// `counts_per_rev` counts, and the speed from the encoder (as the paper's logger, whose
@@ -236,7 +249,8 @@ impl MeasurementModel {
             voltage,
             current,
             speed,
-            position: Some(position),
+            position: (self.encoder_counts_per_rev.is_some() || self.is_ideal())
+                .then_some(position),
             clipped,
         })
     }

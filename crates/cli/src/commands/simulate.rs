@@ -225,9 +225,7 @@ pub fn run(a: &Settings) -> Result<()> {
         }
     ));
     let mut meta = crate::simulated::metadata(motor, &effects, input);
-    let ideal = measurement.adc.is_none()
-        && measurement.noise_std.iter().all(|&s| s == 0.0)
-        && measurement.encoder_counts_per_rev.is_none();
+    let ideal = measurement.is_ideal();
     meta.push((
         "measurement".into(),
         if ideal {
