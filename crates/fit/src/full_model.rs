@@ -210,7 +210,7 @@ const NOISE_TRIM: f64 = 0.005;
 /// dropped, over `√6` (the second difference of white noise has variance 6σ²; a smooth signal
 /// contributes `y'' dt²`, negligible at logger rates). An RMS rather than a median, because
 /// quantisation (ADC, encoder) shows as sparse jumps of one step whose median is 0. Floored at
-/// [`noise_floor`], so that exact data still gives finite weights. Unit of `y`.
+/// 1e-7 of the signal's range, so that exact data still gives finite weights. Unit of `y`.
 pub fn noise_std(y: &[f64]) -> f64 {
     let mut d2: Vec<f64> = y
         .windows(3)

@@ -101,7 +101,8 @@ pub struct LevelEstimate {
     pub variance_v2: f64,
     /// The part of `variance_v2` that is the quantiser's bias \[V²\]: fixed by where the level
     /// sits between codes, not by the noise, so it need not average out over several levels
-    /// ([`pooled_level_variance`]); 0 for an unquantised level and one fitted at a rail.
+    /// (the fits count it once per level reading the same code, [`Self::bias_code`]); 0 for an
+    /// unquantised level and one fitted at a rail.
     pub bias_variance_v2: f64,
     /// The ADC code the level reads, counted from the scale's lowest value (0 where there is
     /// no bias part): levels of one fit that read the same code sit alike between codes.
