@@ -17,7 +17,21 @@ use fit::{
 use motor_model::{Effects, Input, MotorParams, Record};
 
 use crate::record_csv::{read_loaded, ColumnMap, Loaded};
-use crate::BadInput;
+use crate::{BadInput, NotConverged};
+
+/// The error of a fit of `label` as the exit code sees it: the optimiser failing (it found no
+/// usable minimum from the fit's own start) is a failed fit (exit 3), with the way to give a
+/// start; anything else is a record or setting the method cannot take (exit 2).
+fn fit_error(label: &str, e: &fit::FitError) -> anyhow::Error {
+    match e {
+        fit::FitError::Solver(_) => NotConverged(format!(
+            "{label}: {e} — the fit found no usable minimum from its own start: give one by \
+             fitting the records with identify --record … --start FILE.json (R, L, k, f, J, Ts)"
+        ))
+        .into(),
+        _ => BadInput(format!("{label}: {e}")).into(),
+    }
+}
 
 /// A step record read and located: owns the columns the [`StepTest`] borrows.
 pub struct LoadedStep {
@@ -344,7 +358,13 @@ pub fn identify_pair(
         method,
         LmSettings::default(),
     )
-    .map_err(|e| BadInput(format!("{} / {}: {e}", hv.label, lv.label)).into())
+    .map_err(|e| {
+        let label = format!("{} / {}", hv.label, lv.label);
+        match &e {
+            fit::StepPairError::Start(f) | fit::StepPairError::Full(f) => fit_error(&label, f),
+            _ => BadInput(format!("{label}: {e}")).into(),
+        }
+    })
 }
 
 /// A record of any excitation, read and checked: owns what [`ExcitedRecord`] borrows.
@@ -546,7 +566,7 @@ pub fn fit_excited_from(
         &Effects::none(),
         LmSettings::default(),
     )
-    .map_err(|e| BadInput(format!("{label}: {e}")))?;
+    .map_err(|e| fit_error(label, &e))?;
     Ok(ExcitedFit {
         start,
         full,
@@ -567,7 +587,7 @@ pub fn fit_voltage_speed(
         torque_constant,
         ..FeedforwardSettings::default()
     };
-    identify_feedforward(&records, settings).map_err(|e| BadInput(format!("{label}: {e}")).into())
+    identify_feedforward(&records, settings).map_err(|e| fit_error(label, &e))
 }
 
 /// The channels `rec` measured, for [`fit::RecordKind::decide`]: the current's range in ADC

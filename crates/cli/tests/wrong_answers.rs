@@ -404,3 +404,46 @@ fn refusals_name_the_real_cause() {
     let out = motorid(&["simulate", "--duration", "1e9", "-o", &p("x.csv")]);
     assert!(!stderr(&out).contains("--rate 0"), "{}", stderr(&out));
 }
+
+#[test]
+fn an_optimiser_that_finds_no_minimum_is_a_failed_fit_not_bad_input() {
+    // A small fast servo (τe 1 ms, τm 8 ms) through the logger at 1 kHz: the output-error fit
+    // from its own start ended without normal equations, reported as bad input (exit 2) with
+    // no hint. The records are sound: a failed fit is exit 3, and says how to give a start.
+    let dir = scratch("no-minimum");
+    let motor = dir.join("servo.json");
+    std::fs::write(
+        &motor,
+        r#"{"R":2,"L":0.002,"k":0.05,"f":1e-5,"J":1e-5,"Ts":0.005}"#,
+    )
+    .unwrap();
+    let (hv, lv) = (dir.join("h.csv"), dir.join("l.csv"));
+    for (path, volts, seed) in [(&hv, "24", "1"), (&lv, "1", "101")] {
+        let mut args = LOGGER.to_vec();
+        args.extend_from_slice(&[
+            "--motor",
+            motor.to_str().unwrap(),
+            "--voltage",
+            volts,
+            "--duration",
+            "10",
+            "--seed",
+            seed,
+        ]);
+        simulate_to(path, &args);
+    }
+    let out = motorid(&[
+        "identify",
+        "-q",
+        "--high",
+        hv.to_str().unwrap(),
+        "--low",
+        lv.to_str().unwrap(),
+    ]);
+    let err = stderr(&out);
+    match out.status.code() {
+        Some(0) => {}
+        Some(3) => assert!(err.contains("--start FILE.json"), "{err}"),
+        code => panic!("exit {code:?}: {err}"),
+    }
+}

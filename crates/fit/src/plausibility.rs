@@ -63,7 +63,7 @@ impl fmt::Display for Refusal {
             } => write!(
                 f,
                 "the model explains the {} of record {} worse than its mean does (NRMSE {nrmse:.3} > 1): \
-                 the fit found a wrong minimum (give a start with --start) or the records do not fit the model",
+                 the fit found a wrong minimum (a start nearer the truth may help: identify --record … --start FILE.json) or the records do not fit the model",
                 channel.name(),
                 test + 1
             ),
