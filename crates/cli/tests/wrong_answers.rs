@@ -447,3 +447,87 @@ fn an_optimiser_that_finds_no_minimum_is_a_failed_fit_not_bad_input() {
         code => panic!("exit {code:?}: {err}"),
     }
 }
+
+#[test]
+fn the_paper_method_on_records_it_does_not_suit_is_refused_or_flagged() {
+    // A small fast servo (τe 1 ms, τm 8 ms) at 2 kHz: `--method paper` printed k = 1.4e-12
+    // N·m/A, exit 0, and a (C.8) speed check "converged" on no samples at all; on 10 s records
+    // its speed check gave wn 350 rad/s against the current fit's 1841, without a word.
+    let dir = scratch("paper-unsuited");
+    let motor = dir.join("servo.json");
+    std::fs::write(
+        &motor,
+        r#"{"R":2,"L":0.002,"k":0.05,"f":1e-5,"J":1e-5,"Ts":0.005}"#,
+    )
+    .unwrap();
+    let pair = |duration: &str| {
+        let (hv, lv) = (
+            dir.join(format!("h{duration}.csv")),
+            dir.join(format!("l{duration}.csv")),
+        );
+        for (path, volts, seed) in [(&hv, "24", "1"), (&lv, "1", "2")] {
+            let mut args = LOGGER.to_vec();
+            args.extend_from_slice(&[
+                "--motor",
+                motor.to_str().unwrap(),
+                "--voltage",
+                volts,
+                "--rate",
+                "2000",
+                "--duration",
+                duration,
+                "--seed",
+                seed,
+            ]);
+            simulate_to(path, &args);
+        }
+        (hv, lv)
+    };
+    let (hv, lv) = pair("3");
+    assert_bad_input(
+        &[
+            "identify",
+            "--method",
+            "paper",
+            "--high",
+            hv.to_str().unwrap(),
+            "--low",
+            lv.to_str().unwrap(),
+        ],
+        "yet the rotor turns in the",
+    );
+    let (hv, lv) = pair("10");
+    let out = motorid(&[
+        "identify",
+        "--method",
+        "paper",
+        "--high",
+        hv.to_str().unwrap(),
+        "--low",
+        lv.to_str().unwrap(),
+    ]);
+    let text = stdout(&out);
+    assert!(
+        !out.status.success() || text.contains("warning: the (C.8) speed check contradicts"),
+        "{text}"
+    );
+    // The paper's own motor: the check agrees, no warning.
+    let (h, l) = (dir.join("ph.csv"), dir.join("pl.csv"));
+    for (path, volts) in [(&h, "40"), (&l, "2.5")] {
+        let mut args = LOGGER.to_vec();
+        args.extend_from_slice(&["--voltage", volts]);
+        simulate_to(path, &args);
+    }
+    let out = motorid(&[
+        "identify",
+        "--method",
+        "paper",
+        "--high",
+        h.to_str().unwrap(),
+        "--low",
+        l.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stdout(&out).contains("(C.8) speed check: wn"));
+    assert!(!stdout(&out).contains("contradicts"), "{}", stdout(&out));
+}

@@ -221,6 +221,29 @@ pub struct PaperIdentification {
     pub speed_check: Result<SpeedCheck, FitError>,
 }
 
+/// Largest ratio between the (C.8) check's ωn or ζ and the current fit's (Eqs. (35), (36))
+/// within which the speed bears the result out. The paper's motor agrees within 2 %
+/// (ωn 0.3580 against 0.3552 rad/s, ζ 1.515 against 1.468, logger records); a factor of two is
+/// no agreement (a small servo at 2 kHz: ωn 350.5 against 1841 rad/s).
+pub const C8_MAX_RATIO: f64 = 2.0;
+
+impl PaperIdentification {
+    /// Why the high-voltage speed contradicts the result, if its (C.8) check gives ωn or ζ more
+    /// than [`C8_MAX_RATIO`] away from the current fit's; `None` when they agree or the check
+    /// was not made.
+    pub fn speed_check_contradiction(&self) -> Option<String> {
+        let c = self.speed_check.as_ref().ok()?;
+        let ratio = |a: f64, b: f64| (a / b).max(b / a);
+        let off = |a: f64, b: f64| !(ratio(a, b) <= C8_MAX_RATIO);
+        (off(c.omega_n, self.high.omega_n) || off(c.zeta, self.high.zeta)).then(|| {
+            format!(
+                "the (C.8) speed check contradicts the current's fit (wn {:.4} against {:.4} rad/s, zeta {:.4} against {:.4}): the speed does not bear the paper method's result out — use the full method (--method full)",
+                c.omega_n, self.high.omega_n, c.zeta, self.high.zeta
+            )
+        })
+    }
+}
+
 /// Runs the paper's method: normalise the high-voltage current by its last sample, fit (33)
 /// (from the paper's start β0 = [1; 1; 1], Appendix A), apply (34)–(44) with the last speed
 /// sample as Ωrm, then (46)–(51) with the low-voltage test's last current sample, and finally
@@ -289,7 +312,43 @@ pub fn identify_paper(
         lv.ts_nm,
     )
     .map_err(FitError::model("Eqs. (38)-(48)"))?;
-    let speed_check = motor_model::breakaway_time(&params, high.volts)
+    // The method reads every parameter off one fit and the records' ends: on records it does
+    // not suit (a motor whose time constants are a few samples) it can return a motor the
+    // records rule out (k = 1.4e-12 N·m/A, J = 8e-15 kg·m² for a 0.05 N·m/A servo) — judged
+    // as the full fit's result is.
+    let mut facts = crate::plausibility::RecordFacts::default();
+    for t in [high, low] {
+        let speed = t.speed.map(|s| (crate::full_model::Channel::Speed, s));
+        facts.add(
+            t.dt,
+            t.current.len(),
+            std::iter::once((crate::full_model::Channel::Current, t.current)).chain(speed),
+        );
+    }
+    if let Some(refusal) = crate::plausibility::implausible_motor(&params, &facts) {
+        return Err(domain(
+            "Eqs. (38)-(48)",
+            format!("the result is {refusal} — use the full method (--method full)"),
+        ));
+    }
+    // The record shows the rotor turning: a motor that would start only after the record ends
+    // (or never) is not its motor.
+    let end_s = high.t_first + high.dt * high.current.len() as f64;
+    let t0 = motor_model::breakaway_time(&params, high.volts);
+    if high.speed.is_some_and(crate::plausibility::shows_motion) && !t0.is_some_and(|t| t < end_s) {
+        return Err(domain(
+            "Eqs. (38)-(48)",
+            format!(
+                "the identified motor (R = {:.4e} Ω, k = {:.4e} N·m/A, Ts = {:.4e} N·m) would break away at {} at {:.4} V, yet the rotor turns in the {end_s:.4} s record: the method does not suit these records — use the full method (--method full)",
+                params.r_ohm,
+                params.k_nm_per_a,
+                params.ts_nm,
+                t0.map_or("no time".to_string(), |t| format!("t0 = {t:.4} s")),
+                high.volts
+            ),
+        ));
+    }
+    let speed_check = t0
         .ok_or_else(|| {
             domain(
                 "Eq. (C.8)",
@@ -404,6 +463,9 @@ impl crate::lm::LeastSquares for SpeedC8<'_> {
     }
 }
 
+/// Fewest speed samples after breakaway that [`speed_check_c8`] fits.
+const MIN_C8_SAMPLES: usize = 10;
+
 /// Fits (C.8) to the high-voltage speed normalised by its last sample, with τ measured from the
 /// breakaway instant `t0_s` \[s\] (Eq. (11) of the identified motor), starting from the (σ, ωa)
 /// of the current fit. Returns ωn, ζ from the speed alone.
@@ -428,6 +490,17 @@ pub fn speed_check_c8(
     // First sample after breakaway.
     let first = (((t0_s - high.t_first) / high.dt).floor() + 1.0).max(0.0) as usize;
     let y: Vec<f64> = speed.iter().skip(first).map(|w| w / omega_rm).collect();
+    // Beyond the record, nothing is fitted and the fit "converges" at its start with zero cost:
+    // not a check.
+    if y.len() < MIN_C8_SAMPLES {
+        return Err(domain(
+            "Eq. (C.8)",
+            format!(
+                "the identified motor breaks away at t0 = {t0_s:.4e} s, leaving {} speed samples of the record (at least {MIN_C8_SAMPLES} are needed)",
+                y.len()
+            ),
+        ));
+    }
     let problem = SpeedC8 {
         tau_first: high.t_first + first as f64 * high.dt - t0_s,
         dt: high.dt,

@@ -130,6 +130,20 @@ pub(crate) fn assess_parts(
             nrmse: 1.0 - q.nrmse_fit_percent / 100.0,
         });
     }
+    if let Some(refusal) = implausible_motor(params, facts) {
+        return Some(refusal);
+    }
+    let p = params;
+    let Some(ci) = ci95 else {
+        return Some(Refusal::NoIntervals);
+    };
+    intervals_refusal(p, ci, effects)
+}
+
+/// Why `params` cannot be the motor of records with `facts`, if they cannot: a Coulomb torque
+/// at least the largest motor torque of records in which the motor turns, or a time constant
+/// outside what the records' sample period and span can show.
+pub(crate) fn implausible_motor(params: &MotorParams, facts: &RecordFacts) -> Option<Refusal> {
     let p = params;
     let stall_torque = p.k_nm_per_a * facts.peak_current_a;
     if facts.moved && p.ts_nm >= stall_torque {
@@ -163,9 +177,16 @@ pub(crate) fn assess_parts(
             });
         }
     }
-    let Some(ci) = ci95 else {
-        return Some(Refusal::NoIntervals);
-    };
+    None
+}
+
+/// Why the intervals `ci` of `p` and of the effects' parameters do not make a result: none of
+/// zero width, none wider than the value.
+fn intervals_refusal(
+    p: &MotorParams,
+    ci: &MotorIntervals,
+    effects: &[EffectEstimate],
+) -> Option<Refusal> {
     let motor = ci
         .named()
         .into_iter()

@@ -240,7 +240,8 @@ fn paper_json(paper: &PaperIdentification) -> Value {
         "steady_values": {"Irm": paper.steady_values.i_rm_a, "Wrm": paper.steady_values.omega_rm_rad_s, "Irb": paper.steady_values.i_rb_a},
         "c8_speed_check": match &paper.speed_check {
             Ok(c) => json!({"wn": c.omega_n, "zeta": c.zeta, "rms": c.rms, "termination": c.termination.text(),
-                            "wn_from_current": h.omega_n, "zeta_from_current": h.zeta}),
+                            "wn_from_current": h.omega_n, "zeta_from_current": h.zeta,
+                            "contradiction": paper.speed_check_contradiction()}),
             Err(e) => json!({"failed": e.to_string()}),
         },
     })
@@ -375,6 +376,9 @@ fn print_table(
                 c.omega_n, c.zeta, paper.high.omega_n, paper.high.zeta
             ),
             Err(e) => println!("(C.8) speed check not made: {e}"),
+        }
+        if let Some(why) = paper.speed_check_contradiction() {
+            println!("warning: {why}");
         }
     }
     if let Some(why) = note {
