@@ -234,7 +234,7 @@ impl PaperIdentification {
     pub fn speed_check_contradiction(&self) -> Option<String> {
         let c = self.speed_check.as_ref().ok()?;
         let ratio = |a: f64, b: f64| (a / b).max(b / a);
-        let off = |a: f64, b: f64| !(ratio(a, b) <= C8_MAX_RATIO);
+        let off = |a: f64, b: f64| ratio(a, b).is_nan() || ratio(a, b) > C8_MAX_RATIO;
         (off(c.omega_n, self.high.omega_n) || off(c.zeta, self.high.zeta)).then(|| {
             format!(
                 "the (C.8) speed check contradicts the current's fit (wn {:.4} against {:.4} rad/s, zeta {:.4} against {:.4}): the speed does not bear the paper method's result out — use the full method (--method full)",
