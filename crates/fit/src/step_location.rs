@@ -116,25 +116,39 @@ pub fn locate_step_with(
         .map(|last| last + 1)
         .filter(|&f| f < voltage.len());
     let step_end = fall.unwrap_or(voltage.len());
+    // No step but the noise of a voltage at 0, whose peaks were taken for one: the "step" is
+    // within ten times the noise of the samples off it, or mostly below half of it between its
+    // first and last samples above it.
+    let above = voltage[index..step_end]
+        .iter()
+        .filter(|&&v| high(v))
+        .count();
+    let off: Vec<f64> = voltage[..index]
+        .iter()
+        .chain(&voltage[step_end..])
+        .copied()
+        .collect();
+    let off_noise = crate::full_model::noise_std(&off);
+    // A record that holds its "step" to the end has one jump, which the trimmed noise estimate
+    // of the whole record hardly sees (beyond 34 samples, ten times it stays below the jump).
+    let whole_noise = crate::full_model::noise_std(voltage);
+    let within_noise = match fall {
+        Some(_) => level.abs() < 10.0 * off_noise || 2 * above < step_end - index,
+        None => level.abs() < 10.0 * whole_noise,
+    };
+    if within_noise {
+        return Err(bad(
+            "voltage",
+            format!(
+                "no step: the voltage stays within its noise ({:.2e} V RMS; largest reading {level:.4} V, above half of it in {above} of the {} samples from the first such reading to the last) — a step test needs a step well above the noise (is the voltage column right, or was the supply off?)",
+                whole_noise.max(off_noise),
+                step_end - index
+            ),
+        ));
+    }
     // A step that comes back down is one step only if it holds in between.
     let dip = fall.and_then(|_| voltage[index..step_end].iter().position(|&v| !high(v)));
     if let Some(dip) = dip {
-        // Mostly below half the "step" between its first and last samples above it: no step
-        // but the noise of a voltage at 0, whose peaks were taken for one.
-        let above = voltage[index..step_end]
-            .iter()
-            .filter(|&&v| high(v))
-            .count();
-        if 2 * above < step_end - index {
-            return Err(bad(
-                "voltage",
-                format!(
-                    "no step: the voltage stays within its noise ({:.2e} V RMS; largest reading {level:.4} V, and only {above} of the {} samples from the first to the last reading above half of it) — a step test needs a step well above the noise (is the voltage column right, or was the supply off?)",
-                    crate::full_model::noise_std(voltage),
-                    step_end - index
-                ),
-            ));
-        }
         return Err(bad(
             "voltage",
             format!(
@@ -250,6 +264,20 @@ mod tests {
         let loc = locate_step(&grid(100), &v).unwrap();
         assert_eq!((loc.index, loc.fall), (10, Some(40)));
         assert_eq!(loc.volts, -40.0);
+    }
+
+    #[test]
+    fn a_noise_spike_on_a_voltage_at_zero_is_no_step() {
+        // 0 V read with noise, one reading well above the rest: once taken for a step of one
+        // sample, then for a record too coarse to fit.
+        let mut rng = motor_model::NoiseRng::new(5);
+        let mut v: Vec<f64> = (0..2000).map(|_| (1e-3 * rng.normal()).max(0.0)).collect();
+        v[700] = 5e-3;
+        let err = locate_step(&grid(2000), &v).unwrap_err().to_string();
+        assert!(
+            err.contains("no step: the voltage stays within its noise"),
+            "{err}"
+        );
     }
 
     #[test]
