@@ -104,7 +104,7 @@ pub use output_error::{
 pub use paper_method::{
     from_high_voltage, identify_paper, speed_check_c8, suggested_low_voltage_45,
     tau_m_as_printed_37, with_low_voltage, HighVoltageResult, PaperIdentification, SpeedCheck,
-    SteadyValues, TwoTestFriction,
+    SteadyValues, TwoTestFriction, C8_MAX_RATIO,
 };
 pub use parameters::EffectEstimate;
 pub use plausibility::Refusal;
