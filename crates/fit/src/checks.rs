@@ -227,6 +227,10 @@ pub fn check_settled(label: &str, name: &str, y: &[f64], dt: f64) -> Result<(), 
     )
 }
 
+/// Standard deviations of the noise in the difference of [`check_settled_for`]'s two means
+/// beyond which their difference counts as motion.
+const SETTLED_NOISE_SDS: f64 = 4.0;
+
 /// [`check_settled`] with the caller's `advice` (why a steady end is needed, what to do) at the
 /// end of the error.
 pub fn check_settled_for(
@@ -247,7 +251,12 @@ pub fn check_settled_for(
         mean(&window[window.len() - fifth..]),
     );
     let moved = (last - first).abs();
-    if moved > SETTLED_FRACTION * last.abs() {
+    // Nor a difference the noise alone makes: two means of `fifth` samples of white noise σ
+    // differ with standard deviation σ √(2/fifth). On a 200 Hz record whose exact current was
+    // flat to all its digits over its last 0.5 s, the two means (8 samples each, 0.019 A of
+    // noise) differed by 0.0076 A and the record was called unsettled ("moves by 2.2 %").
+    let noise = crate::full_model::noise_std(window) * (2.0 / fifth as f64).sqrt();
+    if moved > SETTLED_FRACTION * last.abs() && moved > SETTLED_NOISE_SDS * noise {
         return Err(bad(
             label,
             format!(
@@ -258,4 +267,25 @@ pub fn check_settled_for(
         ));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn noise_about_a_settled_value_is_not_motion_but_a_drift_is() {
+        // 400 samples at 200 Hz, the last 40 judged: means of 8 samples each.
+        let mut rng = motor_model::NoiseRng::new(1);
+        let flat: Vec<f64> = (0..400).map(|_| 0.32 + 0.019 * rng.normal()).collect();
+        assert!(check_settled("test", "current", &flat, 5e-3).is_ok());
+        // The same noise on a current still rising by 10 % over the judged tail.
+        let rising: Vec<f64> = flat
+            .iter()
+            .enumerate()
+            .map(|(i, y)| y + 0.32 * 0.1 * (i as f64 - 360.0).max(0.0) / 40.0)
+            .collect();
+        let err = check_settled("test", "current", &rising, 5e-3).unwrap_err();
+        assert!(err.to_string().contains("has not settled"), "{err}");
+    }
 }
