@@ -157,10 +157,7 @@ pub fn check_step_test(label: &str, t: &StepTest<'_>) -> Result<(), FitError> {
 /// parameters come out negative ("R = −0.314 must be greater than zero") without a word on
 /// why.
 fn check_signs(label: &str, t: &StepTest<'_>) -> Result<(), FitError> {
-    let end = |y: &[f64]| {
-        let tail = &y[y.len() - (y.len() / 10).max(1)..];
-        tail.iter().sum::<f64>() / tail.len() as f64
-    };
+    let end = tail_mean;
     let against = |y: &[f64]| {
         let e = end(y);
         e * t.volts < 0.0 && e.abs() > 5.0 * crate::full_model::noise_std(y)
@@ -225,6 +222,13 @@ pub fn check_settled(label: &str, name: &str, y: &[f64], dt: f64) -> Result<(), 
         dt,
         "the paper's method reads the steady state off the record's end — record longer (several mechanical time constants) or use --method full",
     )
+}
+
+/// Mean of the last tenth of a series (at least its last sample): the steady value of a
+/// settled record. Unit of `y`; `y` must not be empty.
+pub(crate) fn tail_mean(y: &[f64]) -> f64 {
+    let n = (y.len() / 10).max(1);
+    y[y.len() - n..].iter().sum::<f64>() / n as f64
 }
 
 /// Standard deviations of the noise in the difference of [`check_settled_for`]'s two means

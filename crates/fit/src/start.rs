@@ -8,6 +8,7 @@
 
 use motor_model::MotorParams;
 
+use crate::checks::tail_mean;
 use crate::error::FitError;
 use crate::full_model::StepTest;
 
@@ -23,12 +24,6 @@ fn solve2(a: f64, b: f64, c: f64, d: f64, e: f64, f: f64) -> Option<(f64, f64)> 
     let det = a * d - b * c;
     (det.abs() > f64::EPSILON * (a * d).abs().max((b * c).abs()))
         .then(|| ((e * d - b * f) / det, (a * f - e * c) / det))
-}
-
-/// Mean of the last tenth of a series (the steady value of a settled record).
-fn tail_mean(y: &[f64]) -> f64 {
-    let n = (y.len() / 10).max(1);
-    y[y.len() - n..].iter().sum::<f64>() / n as f64
 }
 
 /// The value a series settles to: the mean of its last tenth, or, where the record ends while
