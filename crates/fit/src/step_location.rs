@@ -123,25 +123,27 @@ pub fn locate_step_with(
         .iter()
         .filter(|&&v| high(v))
         .count();
-    let off: Vec<f64> = voltage[..index]
-        .iter()
-        .chain(&voltage[step_end..])
-        .copied()
-        .collect();
-    let off_noise = crate::full_model::noise_std(&off);
-    // A record that holds its "step" to the end has one jump, which the trimmed noise estimate
-    // of the whole record hardly sees (beyond 34 samples, ten times it stays below the jump).
-    let whole_noise = crate::full_model::noise_std(voltage);
+    let noise = crate::full_model::noise_std;
     let within_noise = match fall {
-        Some(_) => level.abs() < 10.0 * off_noise || 2 * above < step_end - index,
-        None => level.abs() < 10.0 * whole_noise,
+        Some(_) => {
+            let off: Vec<f64> = voltage[..index]
+                .iter()
+                .chain(&voltage[step_end..])
+                .copied()
+                .collect();
+            level.abs() < 10.0 * noise(&off) || 2 * above < step_end - index
+        }
+        // A record that holds its "step" to the end has one jump, which the trimmed noise
+        // estimate of the whole record hardly sees (beyond 34 samples, ten times it stays below
+        // the jump).
+        None => level.abs() < 10.0 * noise(voltage),
     };
     if within_noise {
         return Err(bad(
             "voltage",
             format!(
                 "no step: the voltage stays within its noise ({:.2e} V RMS; largest reading {level:.4} V, above half of it in {above} of the {} samples from the first such reading to the last) — a step test needs a step well above the noise (is the voltage column right, or was the supply off?)",
-                whole_noise.max(off_noise),
+                noise(voltage),
                 step_end - index
             ),
         ));
