@@ -531,3 +531,80 @@ fn the_paper_method_on_records_it_does_not_suit_is_refused_or_flagged() {
     assert!(stdout(&out).contains("(C.8) speed check: wn"));
     assert!(!stdout(&out).contains("contradicts"), "{}", stdout(&out));
 }
+
+#[test]
+fn a_fast_servo_read_with_a_third_of_an_adc_step_of_noise_is_not_overconfident() {
+    // Exit 0 with f 9.940e-6 [9.930e-6, 9.950e-6] (truth 1e-5) and Ts 4 half-widths off: the
+    // settled current reads the codes either side of its level, more than one step from its
+    // mean, so the current was taken as settled for its last 60 samples only and its
+    // quantisation offset went into f and Ts; the output-error fit, taken because the step at
+    // the first sample read as "a slice of a longer run", had no such offset at all.
+    // With `--initial-state rest` the fit from the paper's result (its Eq. (33) fit on a
+    // one-sample electrical time constant) was refused as a wrong minimum.
+    let dir = scratch("fast-servo-third-lsb");
+    let motor = dir.join("s.json");
+    std::fs::write(
+        &motor,
+        r#"{"R":2,"L":0.002,"k":0.05,"f":1e-5,"J":1e-5,"Ts":0.005}"#,
+    )
+    .unwrap();
+    let truth = [
+        ("R", 2.0),
+        ("L", 0.002),
+        ("k", 0.05),
+        ("f", 1e-5),
+        ("J", 1e-5),
+        ("Ts", 0.005),
+    ];
+    let (hv, lv) = (dir.join("h.csv"), dir.join("l.csv"));
+    for seed in [1u32, 2] {
+        for (path, volts, s) in [(&hv, "24", seed), (&lv, "1", seed + 100)] {
+            simulate_to(
+                path,
+                &[
+                    "--motor",
+                    motor.to_str().unwrap(),
+                    "--voltage",
+                    volts,
+                    "--duration",
+                    "10",
+                    "--rate",
+                    "1000",
+                    "--adc-bits",
+                    "10",
+                    "--noise-lsb",
+                    "0.3",
+                    "--encoder-cpr",
+                    "2000",
+                    "--speed-from",
+                    "encoder",
+                    "--seed",
+                    &s.to_string(),
+                    "--quiet",
+                ],
+            );
+        }
+        let pair = [
+            "identify",
+            "--high",
+            hv.to_str().unwrap(),
+            "--low",
+            lv.to_str().unwrap(),
+        ];
+        let text = motorid(&pair);
+        assert_eq!(text.status.code(), Some(0), "{}", stderr(&text));
+        assert!(
+            stdout(&text).starts_with("record kind: high- and low-voltage steps")
+                && !stdout(&text).contains("slice of a longer run"),
+            "a step at the first sample starts at rest: {}",
+            stdout(&text)
+        );
+        for extra in [&[][..], &["--initial-state", "rest"][..]] {
+            let mut args = pair.to_vec();
+            args.extend_from_slice(extra);
+            let (v, out) = json_of(&args);
+            assert_eq!(out.status.code(), Some(0), "{extra:?}: {}", stderr(&out));
+            assert_truth_in_intervals(&v, &truth);
+        }
+    }
+}

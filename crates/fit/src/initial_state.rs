@@ -151,6 +151,27 @@ struct StartLevels<'a> {
     /// The speed at the first sample \[rad/s\] and its standard error ([`speed_at_start`] with
     /// an encoder).
     start_speed: (f64, f64),
+    /// With an encoder, whether its first two angle differences show a rotor that was at rest
+    /// at the first sample and is speeding up ([`starts_speeding_up`]).
+    speeding_up: bool,
+}
+
+/// Whether the angles `θ0, θ1, θ2` show a rotor at rest at the first sample that speeds up:
+/// the first difference at most half the second, both of one sign, the second not zero. From
+/// rest at `t = 0` a speed `ω` that rises convex over the first period (a current that grows
+/// from 0 through L) has `θ1 − θ0 = ∫ω ≤ ω(dt) dt/2`, and the second period at least
+/// `ω(dt) dt`; a rotor already turning at `Ω0` covers `Ω0 dt` in the first period and could
+/// not double its mean speed in one more — not while its current, as [`detect_rest`] also
+/// asks, is still 0. The parabola of [`speed_at_start`] cannot follow that start when the
+/// time constants are a sample or two: a 2 ms motor stepped at the first sample of a 1 kHz
+/// record read as turning at −20.7 rad/s and was fitted as a slice of a longer run.
+fn starts_speeding_up(angle: &[f64]) -> bool {
+    let [a, b, c] = match angle.get(..3) {
+        Some(&[a, b, c]) => [a, b, c],
+        _ => return false,
+    };
+    let (d1, d2) = (b - a, c - b);
+    d2 != 0.0 && d1 * d2 >= 0.0 && 2.0 * d1.abs() <= d2.abs()
 }
 
 impl<'a> StartLevels<'a> {
@@ -200,6 +221,7 @@ impl<'a> StartLevels<'a> {
             noise,
             floor,
             start_speed,
+            speeding_up: record.position.is_some_and(starts_speeding_up),
         })
     }
 
@@ -209,7 +231,7 @@ impl<'a> StartLevels<'a> {
         let (c0, w0) = (self.current[0], self.speed[0]);
         let (w_start, sw_start) = self.start_speed;
         (c0.abs() <= REST_SIGMAS * self.noise.0 + self.floor.0
-            && w_start.abs() <= REST_SIGMAS * sw_start + self.floor.1)
+            && (self.speeding_up || w_start.abs() <= REST_SIGMAS * sw_start + self.floor.1))
             .then(|| DetectedInitialState {
                 state: InitialState::Rest,
                 reason: format!(
@@ -232,7 +254,8 @@ pub fn detect_rest(record: &StartChannels<'_>) -> Result<Option<DetectedInitialS
 /// an encoder, the speed at the first sample is the slope at t = 0 of a parabola fitted to the
 /// first 6 angles, within 5 of its standard errors: a difference of angles is the mean speed
 /// over a period in which a motor started at that sample already moves, and one count per
-/// sample can exceed the noise level of the speed);
+/// sample can exceed the noise level of the speed; or the first angle difference at most half
+/// the second and the current 0, for a motor too fast for that parabola);
 /// otherwise steady when both stay flat over the first level (the samples before the first
 /// change of voltage, at most a tenth of the record, at least 16: the means of its two halves
 /// within 4 standard errors and 0.5 % of the largest |value|), else free. The speed is the

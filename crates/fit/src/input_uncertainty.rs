@@ -141,19 +141,7 @@ pub fn estimate_level(samples: &[f64], scale: &VoltageScale) -> Option<LevelEsti
             bias_code: 0,
         });
     };
-    let (lo, hi) = samples
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
-    let top = ((hi - lo) / q).round() as usize;
-    let mut counts = vec![0.0; top + 1];
-    for v in samples {
-        let code = ((v - lo) / q).round() as i64;
-        if let Some(slot) = usize::try_from(code).ok().and_then(|c| counts.get_mut(c)) {
-            *slot += 1.0;
-        }
-    }
+    let (lo, hi, counts) = code_counts(samples, q);
     let at = |v: f64, rail: f64| (v - rail).abs() < 0.25 * q;
     let seen = counts.iter().filter(|&&c| c > 0.0).count();
     let first = counts.first().copied().unwrap_or(0.0);
@@ -161,7 +149,7 @@ pub fn estimate_level(samples: &[f64], scale: &VoltageScale) -> Option<LevelEsti
     let low_rail = at(lo, scale.min_v) && first > RAIL_FRACTION * nf;
     let high_rail = at(hi, scale.max_v) && last > RAIL_FRACTION * nf;
     if (low_rail || high_rail) && seen >= 3 {
-        if let Some((mu, var)) = censored_fit(&counts, low_rail, high_rail) {
+        if let Some((mu, var, _)) = censored_fit(&counts, low_rail, high_rail) {
             return Some(LevelEstimate {
                 volts: lo + mu * q,
                 variance_v2: var * q * q,
@@ -170,8 +158,7 @@ pub fn estimate_level(samples: &[f64], scale: &VoltageScale) -> Option<LevelEsti
             });
         }
     }
-    let sigma2 = (s2 - q * q / 12.0).max(0.0);
-    let bias = quantisation_bias_variance(sigma2.sqrt(), q);
+    let bias = quantisation_bias_variance(quantised_noise_sigma(samples, q), q);
     Some(LevelEstimate {
         volts: mean,
         variance_v2: s2 / nf + bias,
@@ -302,9 +289,10 @@ pub(crate) fn phi(x: f64) -> f64 {
     0.5 * libm::erfc(-x / std::f64::consts::SQRT_2)
 }
 
-/// Maximum-likelihood level `μ` and its variance (in codes, code 0 = the lowest seen) of a
-/// Gaussian quantised into `counts`, the lowest (highest) code censored when it is a rail.
-fn censored_fit(counts: &[f64], low_rail: bool, high_rail: bool) -> Option<(f64, f64)> {
+/// Maximum-likelihood level `μ`, its variance and the noise σ (all in codes, code 0 = the
+/// lowest seen) of a Gaussian quantised into `counts`, the lowest (highest) code censored when
+/// it is a rail.
+fn censored_fit(counts: &[f64], low_rail: bool, high_rail: bool) -> Option<(f64, f64, f64)> {
     let top = counts.len() - 1;
     let nll = |mu: f64, ln_sigma: f64| -> f64 {
         let s = ln_sigma.exp();
@@ -387,7 +375,49 @@ fn censored_fit(counts: &[f64], low_rail: bool, high_rail: bool) -> Option<(f64,
     let (_, hm) = hessian_at(x);
     let det = hm[0][0] * hm[1][1] - hm[0][1] * hm[0][1];
     let var_mu = hm[1][1] / det;
-    (x[0].is_finite() && var_mu.is_finite() && var_mu > 0.0 && det > 0.0).then_some((x[0], var_mu))
+    (x[0].is_finite() && var_mu.is_finite() && var_mu > 0.0 && det > 0.0).then_some((
+        x[0],
+        var_mu,
+        x[1].exp(),
+    ))
+}
+
+/// The readings `samples` of one constant level quantised with step `q`: their lowest and
+/// highest values and their count per code from the lowest.
+fn code_counts(samples: &[f64], q: f64) -> (f64, f64, Vec<f64>) {
+    let (lo, hi) = samples
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    let top = ((hi - lo) / q).round().clamp(0.0, 1e6) as usize;
+    let mut counts = vec![0.0; top + 1];
+    for v in samples {
+        let code = ((v - lo) / q).round() as i64;
+        if let Some(slot) = usize::try_from(code).ok().and_then(|c| counts.get_mut(c)) {
+            *slot += 1.0;
+        }
+    }
+    (lo, hi, counts)
+}
+
+/// The noise σ (unit of `samples`) behind the readings `samples` of one constant level
+/// quantised with step `q`: the maximum-likelihood σ of a Gaussian quantised into the codes
+/// seen, 0 when they are one code. Sheppard's `√max(s² − q²/12, 0)` is exact only averaged
+/// over the level's place between codes: at a third of a step it read 0.23 steps for 0.3 on a
+/// level near a code's centre, and the bias variance it implies
+/// ([`quantisation_bias_variance`]) is then four times too large. Sheppard's value where
+/// the likelihood has no maximum.
+fn quantised_noise_sigma(samples: &[f64], q: f64) -> f64 {
+    let (_, _, counts) = code_counts(samples, q);
+    let n = samples.len() as f64;
+    let mean = samples.iter().sum::<f64>() / n;
+    let s2 = samples.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+    let sheppard = (s2 - q * q / 12.0).max(0.0).sqrt();
+    match counts.iter().filter(|&&c| c > 0.0).count() {
+        0 | 1 => 0.0,
+        _ => censored_fit(&counts, false, false).map_or(sheppard, |(_, _, sigma)| sigma * q),
+    }
 }
 
 /// What one step test leaves unknown about its input (see [`crate::identify_full_with_inputs`]).
@@ -430,25 +460,37 @@ impl StepInputs {
     }
 }
 
-/// The samples at the end of `current` that stay within one ADC step `lsb` of the final level
-/// (the mean of the last 5 %), as the index of the first, with the variance of their common
-/// quantisation offset; `None` when that variance is negligible (noise of a step or more
+/// Standard deviations of the tail's scatter that a settled current may stray from its final
+/// level by ([`settled_current`]): four, so that a noise excursion of a settled reading is not
+/// taken for motion (one such in 30 000 samples).
+const SETTLED_SPREAD_SDS: f64 = 4.0;
+
+/// The samples at the end of `current` that stay near its final level (the mean of the last
+/// 5 %): within one ADC step `lsb`, or [`SETTLED_SPREAD_SDS`] standard deviations of the last
+/// 5 % where its noise is larger; as the index of the first, with the variance of their common
+/// quantisation offset. `None` when that variance is negligible (noise of a step or more
 /// dithers the quantiser) or nothing settles.
+///
+/// Noise of a third of a step leaves the mean of a settled current a few hundredths of a step
+/// off ([`quantisation_bias_variance`]) while its readings reach the codes either side of the
+/// level, more than one step from the mean: a bound of one step found a 10 s record settled for
+/// its last 60 samples only, and the offset of the other 9 800 went into f and Ts (f 6.5
+/// half-widths off its interval).
 pub(crate) fn settled_current(current: &[f64], lsb: f64) -> Option<(usize, f64)> {
     if !(lsb > 0.0 && lsb.is_finite()) || current.len() < 20 {
         return None;
     }
     let tail = &current[current.len() - current.len() / 20..];
     let end = tail.iter().sum::<f64>() / tail.len() as f64;
+    let tail_sd =
+        (tail.iter().map(|y| (y - end).powi(2)).sum::<f64>() / (tail.len() - 1) as f64).sqrt();
+    let bound = lsb.max(SETTLED_SPREAD_SDS * tail_sd);
     let from = current
         .iter()
-        .rposition(|y| (y - end).abs() > lsb)
+        .rposition(|y| (y - end).abs() > bound)
         .map_or(0, |i| i + 1);
     let settled = current.get(from..).filter(|s| s.len() >= 2)?;
-    let n = settled.len() as f64;
-    let mean = settled.iter().sum::<f64>() / n;
-    let s2 = settled.iter().map(|y| (y - mean).powi(2)).sum::<f64>() / (n - 1.0);
-    let sigma = (s2 - lsb * lsb / 12.0).max(0.0).sqrt();
+    let sigma = quantised_noise_sigma(settled, lsb);
     let variance = quantisation_bias_variance(sigma, lsb);
     (variance > 1e-6 * lsb * lsb).then_some((from, variance))
 }
@@ -798,6 +840,30 @@ mod tests {
         assert!((quantisation_bias_variance(1e-9, q) - 1.0 / 12.0).abs() < 1e-4);
         assert!(quantisation_bias_variance(0.5, q) < 1e-5);
         assert!(quantisation_bias_variance(0.25, q) > 1e-3);
+    }
+
+    #[test]
+    fn a_settled_current_a_third_of_a_step_noisy_is_settled_over_its_whole_tail() {
+        // A level near a code's centre, σ = 0.3 steps: readings reach the codes either side,
+        // more than one step from the mean.
+        let q = 0.01;
+        let mut rng = motor_model::NoiseRng::new(7);
+        for centre in [17.1, 17.5, 17.9] {
+            let current: Vec<f64> = (0..10_000)
+                .map(|_| quantise(centre * q + 0.3 * q * rng.normal(), q, 0.0))
+                .collect();
+            let sigma = quantised_noise_sigma(&current, q);
+            assert!((sigma / (0.3 * q) - 1.0).abs() < 0.1, "{centre}: σ {sigma}");
+            let (from, variance) = settled_current(&current, q).expect("an offset");
+            assert!(from < 100, "{centre}: settled from sample {from}");
+            let expected = quantisation_bias_variance(0.3 * q, q);
+            assert!(
+                (variance / expected - 1.0).abs() < 0.5,
+                "{centre}: {variance} against {expected}"
+            );
+        }
+        // One code throughout: no noise to see, the whole q²/12.
+        assert_eq!(quantised_noise_sigma(&[0.17; 50], q), 0.0);
     }
 
     #[test]

@@ -29,9 +29,9 @@ use crate::full_model::{
 };
 use crate::initial_state::{FittedInitialState, InitialState};
 use crate::input_uncertainty::{
-    bias_group_sizes, estimate_level, fit_with_inputs, grid_phase_score_covariance,
-    noise_free_quantum, pooled_level_variance, LevelEstimate, LevelPrior, Nuisance,
-    NuisanceProblem, VoltageScale,
+    bias_group_sizes, detect_quantum, estimate_level, fit_with_inputs, grid_phase_score_covariance,
+    noise_free_quantum, pooled_level_variance, settled_current, LevelEstimate, LevelPrior,
+    Nuisance, NuisanceProblem, VoltageScale,
 };
 use crate::lm::{half_squared_norm, LeastSquares, LmSettings, NormalEquations};
 use crate::mechanical::{
@@ -214,6 +214,20 @@ struct OeChannel {
     /// ([`crate::input_uncertainty::noise_free_quantum`]); `None` for a noisy or unquantised
     /// channel and for an encoder's speed (its errors are the encoder's, not an ADC's).
     noise_free_quantum: Option<f64>,
+    /// Runs `[from, to)` of `data` (a quantised current's) over which the current has settled
+    /// at one level, each with the index of its offset in [`OeProblem::current_offsets`].
+    settled: Vec<(usize, usize, usize)>,
+}
+
+/// The common quantisation offset of a settled current: its value \[A\] (a nuisance input,
+/// 0 a priori) and prior variance \[A²\].
+#[derive(Debug, Clone, Copy)]
+struct CurrentOffset {
+    value: f64,
+    variance: f64,
+    /// ADC step \[A\] and the code the settled readings' mean rounds to: runs that read alike
+    /// share one offset.
+    key: (u64, i64),
 }
 
 struct OeRecord {
@@ -256,6 +270,8 @@ struct OeProblem {
     /// kept: the fit is then one stage in those weights, not reweighted by its own residuals
     /// ([`crate::full_model::WeightedProblem::reweights`]).
     fixed_sigmas: bool,
+    /// Offsets of the settled runs of quantised currents ([`settle_currents`]).
+    current_offsets: Vec<CurrentOffset>,
 }
 
 impl OeProblem {
@@ -267,11 +283,12 @@ impl OeProblem {
         max_step_s: f64,
     ) -> Result<Self, FitError> {
         let max_step_bits = AtomicU64::new(max_step_s.to_bits());
-        let records = records
+        let mut records = records
             .iter()
             .enumerate()
             .map(|(k, r)| prepare(k, r))
             .collect::<Result<Vec<_>, _>>()?;
+        let current_offsets = settle_currents(&mut records);
         let n_residuals = records
             .iter()
             .flat_map(|r| &r.channels)
@@ -302,6 +319,7 @@ impl OeProblem {
             speed_bound,
             step_factor: 1.0,
             fixed_sigmas: false,
+            current_offsets,
         })
     }
 
@@ -515,7 +533,12 @@ impl OeProblem {
                         Channel::EncoderSpeed => encoder
                             .get_or_insert_with(|| central_difference(&trace.t, &trace.position)),
                     };
-                    ch.keep.iter().map(|&i| full[i]).collect()
+                    let mut model: Vec<f64> = ch.keep.iter().map(|&i| full[i]).collect();
+                    for &(from, to, g) in &ch.settled {
+                        let offset = self.current_offsets[g].value;
+                        model[from..to].iter_mut().for_each(|m| *m += offset);
+                    }
+                    model
                 })
                 .collect();
             out.push(channels);
@@ -818,6 +841,73 @@ fn check_record(k: usize, rec: &ExcitedRecord<'_>) -> Result<(), FitError> {
     Ok(())
 }
 
+/// Finds where each record's quantised current settles at one voltage level and gives each
+/// such run an offset ([`CurrentOffset`], the step fit's settled offset,
+/// `crate::input_uncertainty::settled_current`): a current that settles within a few ADC steps
+/// reads the same few codes for the rest of the level, its quantisation error a constant the
+/// parameters absorb (into f and Ts) and the residuals cannot show, so it enters the intervals
+/// as an input. Runs whose readings average to the same code of the same ADC step share one
+/// offset — a level a PRBS or staircase comes back to reads alike each time — and so do not
+/// average out. A current read without noise gets none: its quantiser enters the intervals
+/// whole ([`grid_phase_score_covariance`]). Levels are the piecewise input's, or the step's.
+fn settle_currents(records: &mut [OeRecord]) -> Vec<CurrentOffset> {
+    let mut offsets: Vec<CurrentOffset> = Vec::new();
+    for rec in records.iter_mut() {
+        let starts: Vec<f64> = match &rec.input {
+            Input::Piecewise { times_s, .. } => times_s.clone(),
+            Input::Step { at_s, .. } => vec![0.0, *at_s],
+            _ => continue,
+        };
+        let dt = rec.dt;
+        let Some(ch) = rec
+            .channels
+            .iter_mut()
+            .find(|c| c.kind == Channel::Current && c.noise_free_quantum.is_none())
+        else {
+            continue;
+        };
+        let Some(q) = detect_quantum(&ch.data) else {
+            continue;
+        };
+        // Level j covers the samples at or after its start and before the next one's.
+        let first_kept = |t: f64| {
+            let i = (t / dt - 1e-9).ceil().max(0.0) as usize;
+            ch.keep.partition_point(|&k| k < i)
+        };
+        let bounds: Vec<usize> = starts
+            .iter()
+            .map(|&t| first_kept(t))
+            .chain(std::iter::once(ch.data.len()))
+            .collect();
+        for w in bounds.windows(2) {
+            let (a, b) = (w[0], w[1]);
+            let Some((from, variance)) = ch.data.get(a..b).and_then(|seg| settled_current(seg, q))
+            else {
+                continue;
+            };
+            let run = &ch.data[a + from..b];
+            let mean = run.iter().sum::<f64>() / run.len() as f64;
+            let key = (q.to_bits(), (mean / q).round() as i64);
+            let g = match offsets.iter().position(|o| o.key == key) {
+                Some(g) => {
+                    offsets[g].variance = offsets[g].variance.max(variance);
+                    g
+                }
+                None => {
+                    offsets.push(CurrentOffset {
+                        value: 0.0,
+                        variance,
+                        key,
+                    });
+                    offsets.len() - 1
+                }
+            };
+            ch.settled.push((a + from, b, g));
+        }
+    }
+    offsets
+}
+
 /// Checks one record's channels and builds its fitted channels.
 fn prepare(k: usize, rec: &ExcitedRecord<'_>) -> Result<OeRecord, FitError> {
     check_record(k, rec)?;
@@ -834,6 +924,7 @@ fn prepare(k: usize, rec: &ExcitedRecord<'_>) -> Result<OeRecord, FitError> {
             sigma: noise_std(&data),
             floor: noise_floor(&data),
             noise_free_quantum,
+            settled: Vec::new(),
             keep,
             data,
         }
@@ -1044,7 +1135,8 @@ const LEVEL_DIFF_STEP: f64 = 1e-5;
 const START_DIFF_STEP: f64 = 1e-2;
 
 impl OeProblem {
-    /// `(record, level, 0: value / 1: start)` of every uncertain input.
+    /// `(record, level, 0: value / 1: start)` of every uncertain input, then `(0, g, 2)` for
+    /// each settled-current offset `g`.
     fn nuisance_slots(&self) -> Vec<(usize, usize, usize)> {
         let mut out = Vec::new();
         for (k, rec) in self.records.iter().enumerate() {
@@ -1057,6 +1149,7 @@ impl OeProblem {
                 }
             }
         }
+        out.extend((0..self.current_offsets.len()).map(|g| (0, g, 2)));
         out
     }
 }
@@ -1087,6 +1180,15 @@ impl NuisanceProblem for OeProblem {
         slots
             .into_iter()
             .filter_map(|(k, j, slot)| {
+                if slot == 2 {
+                    let o = self.current_offsets[j];
+                    return Some(Nuisance {
+                        value: o.value,
+                        prior_mean: 0.0,
+                        prior_variance: o.variance,
+                        step: 1e-3 * o.variance.sqrt(),
+                    });
+                }
                 let rec = &self.records[k];
                 let Input::Piecewise { times_s, volts } = &rec.input else {
                     return None;
@@ -1117,6 +1219,10 @@ impl NuisanceProblem for OeProblem {
 
     fn set_nuisance(&mut self, j: usize, value: f64) {
         if let Some(&(k, level, slot)) = self.nuisance_slots().get(j) {
+            if slot == 2 {
+                self.current_offsets[level].value = value;
+                return;
+            }
             let rec = &mut self.records[k];
             let gap = 1e-9 * rec.dt;
             let (_, start, prior) = rec.priors.get(level).copied().unwrap_or_default();

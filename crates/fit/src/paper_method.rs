@@ -237,7 +237,7 @@ impl PaperIdentification {
         let off = |a: f64, b: f64| ratio(a, b).is_nan() || ratio(a, b) > C8_MAX_RATIO;
         (off(c.omega_n, self.high.omega_n) || off(c.zeta, self.high.zeta)).then(|| {
             format!(
-                "the (C.8) speed check contradicts the current's fit (wn {:.4} against {:.4} rad/s, zeta {:.4} against {:.4}): the speed does not bear the paper method's result out — use the full method (--method full)",
+                "the (C.8) speed check contradicts the current's fit (wn {:.4} against {:.4} rad/s, zeta {:.4} against {:.4}): the speed does not bear the paper method's result out",
                 c.omega_n, self.high.omega_n, c.zeta, self.high.zeta
             )
         })

@@ -95,6 +95,11 @@ pub enum StepRoute {
     /// The full model started from the steady states ([`steady_state_start`]): the paper's
     /// method did not apply.
     FullFromSteadyStates,
+    /// The full model started from the steady states after the fit started from the paper's
+    /// result was refused ([`StepPairIdentification::paper_start_refused`] says why): the
+    /// paper's Eq. (33) fit can settle on a wrong pair of poles (an electrical time constant
+    /// of one sample or less), and the full fit then on a wrong minimum.
+    FullFromSteadyStatesAfterPaper,
 }
 
 impl StepRoute {
@@ -102,7 +107,9 @@ impl StepRoute {
     pub fn method_name(self) -> &'static str {
         match self {
             StepRoute::Paper => "paper",
-            StepRoute::FullFromPaper | StepRoute::FullFromSteadyStates => "full",
+            StepRoute::FullFromPaper
+            | StepRoute::FullFromSteadyStates
+            | StepRoute::FullFromSteadyStatesAfterPaper => "full",
         }
     }
 }
@@ -199,6 +206,9 @@ pub struct StepPairIdentification {
     pub full: Option<FullFit>,
     /// Which route was taken.
     pub route: StepRoute,
+    /// Why the full fit started from the paper's result was set aside, with
+    /// [`StepRoute::FullFromSteadyStatesAfterPaper`] ([`FullFit::failure`]); `None` otherwise.
+    pub paper_start_refused: Option<String>,
 }
 
 impl StepPairIdentification {
@@ -219,10 +229,18 @@ impl StepPairIdentification {
             .unwrap_or_default()
     }
 
-    /// The note to give with the result: why the full fit started from the steady states.
-    pub fn note(&self) -> Option<&PaperSkipped> {
-        match (&self.paper, self.route) {
-            (Err(why), StepRoute::FullFromSteadyStates) => Some(why),
+    /// The note to give with the result, a sentence: why the full fit started from the steady
+    /// states.
+    pub fn note(&self) -> Option<String> {
+        match (&self.paper, self.route, &self.paper_start_refused) {
+            (Err(why), StepRoute::FullFromSteadyStates, _) => Some(format!(
+                "the paper's method does not apply to these records ({why}); the full fit \
+                 started from the steady states instead"
+            )),
+            (_, StepRoute::FullFromSteadyStatesAfterPaper, Some(why)) => Some(format!(
+                "the full fit started from the paper's result was set aside ({why}); the one \
+                 started from the steady states is given instead"
+            )),
             _ => None,
         }
     }
@@ -252,22 +270,16 @@ pub fn identify_step_pair(
                 paper: Ok(p),
                 full: None,
                 route: StepRoute::Paper,
+                paper_start_refused: None,
             }),
             Err(e) => Err(StepPairError::Paper(e)),
         },
         StepMethod::Full => {
-            let (start, route) = match &paper {
-                Ok(p) => (p.params, StepRoute::FullFromPaper),
-                Err(_) => (
-                    steady_state_start(&high.test, &low.test).map_err(StepPairError::Start)?,
-                    StepRoute::FullFromSteadyStates,
-                ),
-            };
-            let full = match (high.whole, low.whole) {
+            let fit_from = |start: &MotorParams| match (high.whole, low.whole) {
                 (None, None) => identify_full_with_inputs(
                     &[high.test, low.test],
                     &[high.inputs, low.inputs],
-                    &start,
+                    start,
                     settings,
                 ),
                 // Rise and fall: the input is piecewise constant, each level (the return's
@@ -275,7 +287,7 @@ pub fn identify_step_pair(
                 (Some(h), Some(l)) => identify_output_error_with_inputs(
                     &[h.record, l.record],
                     &[h.priors.to_vec(), l.priors.to_vec()],
-                    &start,
+                    start,
                     settings,
                 ),
                 _ => Err(FitError::BadData {
@@ -285,12 +297,42 @@ pub fn identify_step_pair(
                              records together with identify --record (output error)"
                         .into(),
                 }),
-            }
-            .map_err(StepPairError::Full)?;
+            };
+            let steady = || steady_state_start(&high.test, &low.test);
+            let Ok(p) = &paper else {
+                let full = fit_from(&steady().map_err(StepPairError::Start)?)
+                    .map_err(StepPairError::Full)?;
+                return Ok(StepPairIdentification {
+                    paper,
+                    full: Some(full),
+                    route: StepRoute::FullFromSteadyStates,
+                    paper_start_refused: None,
+                });
+            };
+            let from_paper = fit_from(&p.params);
+            let refused = match &from_paper {
+                Ok(f) => f.failure(),
+                Err(e) => Some(e.to_string()),
+            };
+            // A fit from the paper's result that is not a result: the steady states are a
+            // second, independent start; their fit replaces it only if it is accepted.
+            let retry = refused.as_ref().and_then(|_| {
+                let start = steady().ok()?;
+                fit_from(&start).ok().filter(FullFit::accepted)
+            });
+            let (full, route, paper_start_refused) = match retry {
+                Some(f) => (f, StepRoute::FullFromSteadyStatesAfterPaper, refused),
+                None => (
+                    from_paper.map_err(StepPairError::Full)?,
+                    StepRoute::FullFromPaper,
+                    None,
+                ),
+            };
             Ok(StepPairIdentification {
                 paper,
                 full: Some(full),
                 route,
+                paper_start_refused,
             })
         }
     }
@@ -605,7 +647,9 @@ mod tests {
         let full = identify_step_pair(&high, &low, StepMethod::Full, LmSettings::default())
             .expect("the full fit runs on the rest");
         assert_eq!(full.route, StepRoute::FullFromSteadyStates);
-        assert_eq!(full.note(), Some(&PaperSkipped::Clipped));
+        assert!(full
+            .note()
+            .is_some_and(|n| n.contains(&PaperSkipped::Clipped.to_string())));
         let p = full.params().expect("a result");
         assert!(
             ((p.r_ohm - truth.r_ohm) / truth.r_ohm).abs() < 1e-4,

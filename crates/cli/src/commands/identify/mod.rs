@@ -378,11 +378,14 @@ fn print_table(
             Err(e) => println!("(C.8) speed check not made: {e}"),
         }
         if let Some(why) = paper.speed_check_contradiction() {
-            println!("warning: {why}");
+            match full {
+                None => println!("warning: {why} — use the full method (--method full)"),
+                Some(_) => println!("warning: {why}"),
+            }
         }
     }
     if let Some(why) = note {
-        println!("note: the paper's method does not apply to these records ({why}); the full fit started from the steady states instead");
+        println!("note: {why}");
     }
     if !poorly.is_empty() {
         println!(
@@ -756,7 +759,7 @@ pub fn run(a: &Settings) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         println!("{}", kinds::kind_line(&kind));
-        let note = result.note().map(ToString::to_string);
+        let note = result.note();
         let whole = hv.whole.is_some() && lv.whole.is_some();
         print_table(method, whole, paper, full, &files, note.as_deref());
     }
