@@ -748,6 +748,73 @@ fn check_unit_plausibility(
     Ok(())
 }
 
+/// How many times the span of the rest of its column a sample may lie beyond the rest before
+/// it is taken for a corrupted value ([`check_isolated_outliers`]).
+const OUTLIER_SPANS: f64 = 10.0;
+
+/// The sample of `y` (its index) that lies more than [`OUTLIER_SPANS`] times the span of the
+/// other samples beyond all of them, if any, with a sample on either side (the first or last
+/// sample of a record may be a level of its own: one sample before a step); `None` when the
+/// others do not vary (nothing to judge by).
+fn isolated_outlier(y: &[f64]) -> Option<usize> {
+    if y.len() < 3 {
+        return None;
+    }
+    let mut order: Vec<usize> = (0..y.len()).collect();
+    order.sort_by(|&a, &b| y[a].total_cmp(&y[b]));
+    let (lo, lo2) = (y[order[0]], y[order[1]]);
+    let (hi, hi2) = (y[order[y.len() - 1]], y[order[y.len() - 2]]);
+    let beyond = |gap: f64, span: f64| span > 0.0 && gap > OUTLIER_SPANS * span;
+    let at = if beyond(hi - hi2, hi2 - lo) {
+        order[y.len() - 1]
+    } else if beyond(lo2 - lo, hi - lo2) {
+        order[0]
+    } else {
+        return None;
+    };
+    (at > 0 && at + 1 < y.len()).then_some(at)
+}
+
+/// Refuses a record one of whose voltage, current, speed or angle samples lies more than
+/// [`OUTLIER_SPANS`] times the span of the rest of its column beyond every other sample: no
+/// motor's signal jumps there for one sample and back, an ADC cannot read it, and a fit would
+/// either bend to it or (as a rail) leave out a sample that is no rail. The line and the value
+/// are named, to correct or delete.
+fn check_isolated_outliers(
+    table: &Table,
+    record: &Record,
+) -> std::result::Result<(), (usize, String)> {
+    let columns = [
+        ("voltage", "V", Some(&record.voltage)),
+        ("current", "A", Some(&record.current)),
+        ("speed", "rad/s", record.speed.as_ref()),
+        ("position", "rad", record.position.as_ref()),
+    ];
+    for (name, unit, col) in columns {
+        let Some(y) = col.filter(|y| !y.is_empty()) else {
+            continue;
+        };
+        if let Some(i) = isolated_outlier(y) {
+            let rest = y
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != i)
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (_, &v)| {
+                    (a.min(v), b.max(v))
+                });
+            return Err((
+                table.lines.get(i).copied().unwrap_or(table.header_line),
+                format!(
+                    "{name} {:e} {unit}, while every other sample of the column lies within [{:.6e}, {:.6e}] {unit}: \
+                     a corrupted value (no motor signal jumps there for one sample) — correct or delete the line",
+                    y[i], rest.0, rest.1
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// One ADC step of analog channel `c` (0 voltage \[V\], 1 current \[A\], 2 speed \[rad/s\])
 /// stated by the `# measurement:` metadata.
 fn adc_lsb(table: &Table, c: usize) -> Option<f64> {
@@ -884,6 +951,7 @@ fn to_record(
         t,
         clipped: [0; 3],
     };
+    check_isolated_outliers(&table, &record)?;
     check_unit_plausibility(&table, &|name| find(&table, name), &record)?;
     let rails = metadata_rails(&table);
     let no_adc = metadata_says_no_adc(&table);
@@ -1010,6 +1078,21 @@ mod tests {
         assert!(e.1.contains("current[mA]"), "{}", e.1);
         let r = record("t,voltage,current[mA]\n0,40,0\n0.001,40,53570\n").unwrap();
         assert_eq!(r.record.current[1], 53.57);
+    }
+
+    #[test]
+    fn one_sample_far_beyond_the_rest_of_its_column_is_an_outlier() {
+        let mut y: Vec<f64> = (0..100).map(|i| 1.0 + 0.01 * f64::from(i % 7)).collect();
+        assert_eq!(isolated_outlier(&y), None);
+        y[40] = 1e6;
+        assert_eq!(isolated_outlier(&y), Some(40));
+        y[40] = -1e300;
+        assert_eq!(isolated_outlier(&y), Some(40));
+        // A first sample before the step, a column that does not vary: not judged.
+        y[40] = 1.0;
+        y[0] = 0.0;
+        assert_eq!(isolated_outlier(&y), None);
+        assert_eq!(isolated_outlier(&[0.0, 0.0, 5.0, 0.0]), None);
     }
 
     #[test]

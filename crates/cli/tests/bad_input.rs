@@ -681,3 +681,59 @@ fn settings_are_checked_before_the_first_run() {
         "a refused fleet wrote records"
     );
 }
+
+#[test]
+fn one_corrupted_sample_is_named_not_taken_for_a_rail() {
+    // A current sample of 1e6 A (or 1e300) in a logger record: with the ADC range in the
+    // metadata it was "1 current samples sit on an ADC rail at 1000000 …" (300 digits for
+    // 1e300) and left out; without the metadata the fit was refused as "a wrong minimum".
+    let dir = scratch("corrupted-sample");
+    let logger = ["--adc-bits", "10", "--noise-lsb", "1", "--duration", "20"];
+    let mut high_args = vec!["--voltage", "40"];
+    high_args.extend(logger);
+    let mut low_args = vec!["--voltage", "2.5", "--seed", "2"];
+    low_args.extend(logger);
+    let high = simulated(&dir, "high.csv", &high_args);
+    let low = simulated(&dir, "low.csv", &low_args);
+    let text = std::fs::read_to_string(&high).unwrap();
+    for (name, value, keep_metadata) in [
+        ("big.csv", "1000000", true),
+        ("huge.csv", "1e300", true),
+        ("bare.csv", "1000000", false),
+    ] {
+        let mut data_row = 0;
+        let mut line_no = 0;
+        let mut corrupted = String::new();
+        for line in text.lines() {
+            if line.starts_with('#') && !keep_metadata {
+                continue;
+            }
+            let mut line = line.to_string();
+            if !line.starts_with('#') && !line.starts_with('t') {
+                data_row += 1;
+                if data_row == 5000 {
+                    let mut cells: Vec<&str> = line.split(',').collect();
+                    cells[2] = value;
+                    line = cells.join(",");
+                    line_no = corrupted.lines().count() + 1;
+                }
+            }
+            corrupted.push_str(&line);
+            corrupted.push('\n');
+        }
+        let path = write(&dir, name, corrupted.as_bytes());
+        assert_bad_input(
+            &[
+                "identify",
+                "--high",
+                path.to_str().unwrap(),
+                "--low",
+                low.to_str().unwrap(),
+            ],
+            &format!(
+                "{name}:{line_no}: current {:e} A",
+                value.parse::<f64>().unwrap()
+            ),
+        );
+    }
+}
