@@ -530,6 +530,30 @@ fn the_paper_method_on_records_it_does_not_suit_is_refused_or_flagged() {
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(stdout(&out).contains("(C.8) speed check: wn"));
     assert!(!stdout(&out).contains("contradicts"), "{}", stdout(&out));
+    // An underdamped motor: "the fit did not converge (maximum iterations reached …)".
+    let (h, l) = (dir.join("uh.csv"), dir.join("ul.csv"));
+    for (path, volts) in [(&h, "40"), (&l, "2.5")] {
+        let mut args = LOGGER.to_vec();
+        args.extend_from_slice(&[
+            "--motor",
+            "../../fixtures/motors/underdamped.json",
+            "--voltage",
+            volts,
+        ]);
+        simulate_to(path, &args);
+    }
+    assert_bad_input(
+        &[
+            "identify",
+            "--method",
+            "paper",
+            "--high",
+            h.to_str().unwrap(),
+            "--low",
+            l.to_str().unwrap(),
+        ],
+        "is underdamped (ζ < 1)",
+    );
 }
 
 #[test]

@@ -244,6 +244,36 @@ impl PaperIdentification {
     }
 }
 
+/// Samples averaged per block by [`undershoot`].
+const UNDERSHOOT_BLOCK: usize = 16;
+/// Standard errors of a block mean by which it must fall below the final level to count as an
+/// undershoot ([`undershoot`]): the lowest of thousands of block means of a settled current
+/// lies some 3.5 below.
+const UNDERSHOOT_SIGMAS: f64 = 6.0;
+/// Smallest undershoot, as a fraction of the final current, that counts ([`undershoot`]).
+const MIN_UNDERSHOOT: f64 = 0.01;
+
+/// The lowest mean of [`UNDERSHOOT_BLOCK`] samples of the step current `current` after its
+/// peak, as a fraction of its final level (the mean of its last tenth), when it lies below
+/// that level by more than [`UNDERSHOOT_SIGMAS`] standard errors (`noise` the current's noise
+/// level) and [`MIN_UNDERSHOOT`] of it: an overdamped motor's current (Eq. (33)) decays to its
+/// final value from above, an underdamped one's swings below it for half a period.
+fn undershoot(current: &[f64], noise: f64) -> Option<f64> {
+    let peak = current
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map(|(i, _)| i)?;
+    let end = crate::checks::tail_mean(current);
+    let low = current[peak..]
+        .chunks_exact(UNDERSHOOT_BLOCK)
+        .map(|b| b.iter().sum::<f64>() / UNDERSHOOT_BLOCK as f64)
+        .fold(f64::INFINITY, f64::min);
+    let bound =
+        (UNDERSHOOT_SIGMAS * noise / (UNDERSHOOT_BLOCK as f64).sqrt()).max(MIN_UNDERSHOOT * end);
+    (end > 0.0 && end - low > bound).then_some(low / end)
+}
+
 /// Runs the paper's method: normalise the high-voltage current by its last sample, fit (33)
 /// (from the paper's start β0 = [1; 1; 1], Appendix A), apply (34)–(44) with the last speed
 /// sample as Ωrm, then (46)–(51) with the low-voltage test's last current sample, and finally
@@ -279,6 +309,17 @@ pub fn identify_paper(
         ));
     }
     let y: Vec<f64> = high.current.iter().map(|c| c / i_rm).collect();
+    if let Some(low) = undershoot(high.current, crate::full_model::noise_std(high.current)) {
+        return Err(domain(
+            "Eq. (33) fit",
+            format!(
+                "after its peak the high-voltage current falls to {:.3} times its final value: the response \
+                 is underdamped (ζ < 1), and Eq. (33), two real exponentials, cannot follow it — use the full \
+                 method (--method full)",
+                low
+            ),
+        ));
+    }
     let record = crate::model33::Record33 {
         t_first: high.t_first,
         dt: high.dt,
