@@ -125,6 +125,10 @@ pub fn check_clipping(shown: &str, loaded: &Loaded, quiet: bool) -> Result<ClipM
     masks
 }
 
+/// Largest share of a record's current samples that may read a 0 A rail while the motor turns
+/// ([`crate::record_csv::Loaded::current_on_zero_rail`]) before the record is refused.
+const MAX_ZERO_RAIL_SHARE: f64 = 0.01;
+
 /// Writes `warnings` to standard error, one a line, unless `quiet`.
 fn warn(warnings: &[String], quiet: bool) {
     if !quiet {
@@ -140,6 +144,21 @@ fn judge_record_clipping(shown: &str, loaded: &Loaded) -> (Vec<String>, Result<C
     let report = loaded.clipping_report();
     let mut line = report.iter();
     let mut warnings = Vec::new();
+    if let Some((count, first, last)) = loaded.current_on_zero_rail {
+        let share = count as f64 / loaded.record.current.len().max(1) as f64;
+        if share > MAX_ZERO_RAIL_SHARE {
+            let refusal = BadInput(format!(
+                "{shown}: {count} current samples ({:.1} %, {} to {}) read the ADC's 0 A rail while the motor turns, \
+                 with readings above it around them: the current is so small on this unipolar range that its noise \
+                 is clipped at 0 A, and the mean of what is left reads high (f and Ts would be biased) — record \
+                 with a range that reaches below 0 A (e.g. --range-current -10,100 on simulate) or with more gain",
+                100.0 * share,
+                loaded.line_span(first, first + 1),
+                loaded.line_span(last, last + 1),
+            ));
+            return (warnings, Err(refusal.into()));
+        }
+    }
     for (channel, mask) in loaded.clipped_channels() {
         let verdict = judge_clipping(channel, mask);
         if verdict == ClippingVerdict::Clean {
@@ -361,6 +380,14 @@ pub fn identify_pair(
     .map_err(|e| {
         let label = format!("{} / {}", hv.label, lv.label);
         match &e {
+            // Settled records whose steady states give no motor (k or Ts ≤ 0): valid data the
+            // nominal model cannot explain, a failed identification, not bad input.
+            fit::StepPairError::Start(f @ fit::FitError::MethodDomain { .. }) => NotConverged(format!(
+                "{label}: {f} — the records' steady states do not follow the motor model (Eqs. (4), (5)) with \
+                 positive parameters: an unmodelled effect (a brush voltage drop, a drag that grows with speed) \
+                 does this; motorid diagnose names it"
+            ))
+            .into(),
             fit::StepPairError::Start(f) | fit::StepPairError::Full(f) => fit_error(&label, f),
             _ => BadInput(format!("{label}: {e}")).into(),
         }

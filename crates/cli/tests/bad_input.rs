@@ -737,3 +737,65 @@ fn one_corrupted_sample_is_named_not_taken_for_a_rail() {
         );
     }
 }
+
+#[test]
+fn a_current_in_ma_beyond_the_metadata_range_is_named_a_units_problem() {
+    // A logger record whose current column was rescaled to mA, header and metadata kept: was
+    // "49998 current samples (100.0 %) sit on an ADC rail at 270.2 …: record again with a wider
+    // range".
+    let dir = scratch("ma-beyond-rails");
+    let high = simulated(
+        &dir,
+        "high.csv",
+        &[
+            "--voltage",
+            "40",
+            "--duration",
+            "20",
+            "--adc-bits",
+            "10",
+            "--noise-lsb",
+            "1",
+        ],
+    );
+    let low = simulated(
+        &dir,
+        "low.csv",
+        &[
+            "--voltage",
+            "2.5",
+            "--duration",
+            "20",
+            "--adc-bits",
+            "10",
+            "--noise-lsb",
+            "1",
+            "--seed",
+            "2",
+        ],
+    );
+    let scaled: String = std::fs::read_to_string(&high)
+        .unwrap()
+        .lines()
+        .map(|line| {
+            if line.starts_with(|c: char| c.is_ascii_digit()) {
+                let mut cells: Vec<String> = line.split(',').map(String::from).collect();
+                cells[2] = (cells[2].parse::<f64>().unwrap() * 1000.0).to_string();
+                cells.join(",") + "\n"
+            } else {
+                format!("{line}\n")
+            }
+        })
+        .collect();
+    let ma = write(&dir, "ma.csv", scaled.as_bytes());
+    assert_bad_input(
+        &[
+            "identify",
+            "--high",
+            ma.to_str().unwrap(),
+            "--low",
+            low.to_str().unwrap(),
+        ],
+        "lies beyond the ADC's range",
+    );
+}

@@ -632,3 +632,89 @@ fn a_fast_servo_read_with_a_third_of_an_adc_step_of_noise_is_not_overconfident()
         }
     }
 }
+
+#[test]
+fn a_current_whose_noise_is_clipped_at_a_zero_amp_rail_is_refused() {
+    // Exit 0 with f 5.9 and Ts 4.0 half-widths off their intervals: a big motor drawing 0.74 A
+    // at its steady speed, 1.5 steps of a 0–492 A range, read 0 A for its noise below; the
+    // fits keep readings at a 0 A rail (a motor at rest reads them), and the rest's mean was
+    // high. With a range below 0 A the same records identify within their intervals.
+    let dir = scratch("zero-amp-rail");
+    let motor = dir.join("big.json");
+    std::fs::write(
+        &motor,
+        r#"{"R":0.05,"L":0.01,"k":1.0,"f":0.01,"J":50.0,"Ts":0.5}"#,
+    )
+    .unwrap();
+    let truth = [
+        ("R", 0.05),
+        ("L", 0.01),
+        ("k", 1.0),
+        ("f", 0.01),
+        ("J", 50.0),
+        ("Ts", 0.5),
+    ];
+    let record = |name: &str, volts: &str, seed: &str, range: Option<&str>| {
+        let path = dir.join(name);
+        let mut args = vec![
+            "--motor",
+            motor.to_str().unwrap(),
+            "--voltage",
+            volts,
+            "--duration",
+            "60",
+            "--adc-bits",
+            "10",
+            "--noise-lsb",
+            "1",
+            "--encoder-cpr",
+            "2000",
+            "--speed-from",
+            "encoder",
+            "--seed",
+            seed,
+            "--quiet",
+        ];
+        if let Some(r) = range {
+            args.extend(["--range-current", r]);
+        }
+        simulate_to(&path, &args);
+        path.to_str().unwrap().to_string()
+    };
+    let low = record("l.csv", "1", "16", Some("-2,22"));
+    let clipped = record("h0.csv", "24", "15", None);
+    assert_bad_input(
+        &["identify", "--high", &clipped, "--low", &low],
+        "read the ADC's 0 A rail while the motor turns",
+    );
+    let bipolar = record("h.csv", "24", "15", Some("-50,550"));
+    let (v, out) = json_of(&["identify", "--high", &bipolar, "--low", &low]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert_truth_in_intervals(&v, &truth);
+}
+
+#[test]
+fn steady_states_no_motor_explains_are_a_failed_fit_not_bad_input() {
+    // An unmodelled brush drop of 0.3 V: "steady-state start … k = -0.34: must be greater than
+    // zero" with exit 2, as if the files were broken.
+    let dir = scratch("brush-drop-start");
+    let (hv, lv) = (dir.join("h.csv"), dir.join("l.csv"));
+    for (path, volts) in [(&hv, "40"), (&lv, "2.5")] {
+        let mut args = LOGGER.to_vec();
+        args.extend_from_slice(&["--voltage", volts, "--effect", "brush_drop:vb=0.3"]);
+        simulate_to(path, &args);
+    }
+    let out = motorid(&[
+        "identify",
+        "--high",
+        hv.to_str().unwrap(),
+        "--low",
+        lv.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(3), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("an unmodelled effect") && stderr(&out).contains("motorid diagnose"),
+        "{}",
+        stderr(&out)
+    );
+}
