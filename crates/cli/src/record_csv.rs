@@ -836,13 +836,15 @@ fn zero_rail_while_moving(
         return None;
     }
     let turning: Vec<bool> = match (&record.position, &record.speed) {
+        // Turning before the sample and after it: a rotor that starts at a step reads 0 A
+        // there as the model does, its current rising from 0 through L.
         (Some(angle), _) if angle.len() == n => (0..n)
             .map(|i| {
                 let (a, b) = (
                     i.saturating_sub(TURNING_SAMPLES),
                     (i + TURNING_SAMPLES).min(n - 1),
                 );
-                angle[a] != angle[b]
+                angle[a] != angle[i] && angle[i] != angle[b]
             })
             .collect(),
         (_, Some(speed)) if speed.len() == n => {

@@ -129,6 +129,10 @@ pub fn check_clipping(shown: &str, loaded: &Loaded, quiet: bool) -> Result<ClipM
 /// ([`crate::record_csv::Loaded::current_on_zero_rail`]) before the record is refused.
 const MAX_ZERO_RAIL_SHARE: f64 = 0.01;
 
+/// Fewest such samples that refuse a record: a few readings of a short record bias nothing
+/// measurable.
+const MIN_ZERO_RAIL_SAMPLES: usize = 20;
+
 /// Writes `warnings` to standard error, one a line, unless `quiet`.
 fn warn(warnings: &[String], quiet: bool) {
     if !quiet {
@@ -146,7 +150,7 @@ fn judge_record_clipping(shown: &str, loaded: &Loaded) -> (Vec<String>, Result<C
     let mut warnings = Vec::new();
     if let Some((count, first, last)) = loaded.current_on_zero_rail {
         let share = count as f64 / loaded.record.current.len().max(1) as f64;
-        if share > MAX_ZERO_RAIL_SHARE {
+        if share > MAX_ZERO_RAIL_SHARE && count >= MIN_ZERO_RAIL_SAMPLES {
             let refusal = BadInput(format!(
                 "{shown}: {count} current samples ({:.1} %, {} to {}) read the ADC's 0 A rail while the motor turns, \
                  with readings above it around them: the current is so small on this unipolar range that its noise \
@@ -382,7 +386,7 @@ pub fn identify_pair(
         match &e {
             // Settled records whose steady states give no motor (k or Ts ≤ 0): valid data the
             // nominal model cannot explain, a failed identification, not bad input.
-            fit::StepPairError::Start(f @ fit::FitError::MethodDomain { .. }) => NotConverged(format!(
+            fit::StepPairError::Start(f @ fit::FitError::Model { .. }) => NotConverged(format!(
                 "{label}: {f} — the records' steady states do not follow the motor model (Eqs. (4), (5)) with \
                  positive parameters: an unmodelled effect (a brush voltage drop, a drag that grows with speed) \
                  does this; motorid diagnose names it"

@@ -17,6 +17,22 @@ fn json_of(args: &[&str]) -> (Value, std::process::Output) {
     (v, out)
 }
 
+/// Writes the motor `json` to `dir/name`: its path, and its six parameters as truth.
+fn motor_file(
+    dir: &std::path::Path,
+    name: &str,
+    json: &str,
+) -> (std::path::PathBuf, Vec<(&'static str, f64)>) {
+    let path = dir.join(name);
+    std::fs::write(&path, json).unwrap();
+    let v: Value = serde_json::from_str(json).unwrap();
+    let truth = ["R", "L", "k", "f", "J", "Ts"]
+        .into_iter()
+        .map(|p| (p, v[p].as_f64().unwrap()))
+        .collect();
+    (path, truth)
+}
+
 /// Exit 0, and every parameter within `rel` of the truth or inside its 95 % interval.
 fn assert_identified(args: &[&str], rel: f64) {
     let (v, out) = json_of(args);
@@ -578,20 +594,11 @@ fn a_fast_servo_read_with_a_third_of_an_adc_step_of_noise_is_not_overconfident()
     // With `--initial-state rest` the fit from the paper's result (its Eq. (33) fit on a
     // one-sample electrical time constant) was refused as a wrong minimum.
     let dir = scratch("fast-servo-third-lsb");
-    let motor = dir.join("s.json");
-    std::fs::write(
-        &motor,
+    let (motor, truth) = motor_file(
+        &dir,
+        "s.json",
         r#"{"R":2,"L":0.002,"k":0.05,"f":1e-5,"J":1e-5,"Ts":0.005}"#,
-    )
-    .unwrap();
-    let truth = [
-        ("R", 2.0),
-        ("L", 0.002),
-        ("k", 0.05),
-        ("f", 1e-5),
-        ("J", 1e-5),
-        ("Ts", 0.005),
-    ];
+    );
     let (hv, lv) = (dir.join("h.csv"), dir.join("l.csv"));
     for seed in [1u32, 2] {
         for (path, volts, s) in [(&hv, "24", seed), (&lv, "1", seed + 100)] {
@@ -652,20 +659,11 @@ fn a_current_whose_noise_is_clipped_at_a_zero_amp_rail_is_refused() {
     // fits keep readings at a 0 A rail (a motor at rest reads them), and the rest's mean was
     // high. With a range below 0 A the same records identify within their intervals.
     let dir = scratch("zero-amp-rail");
-    let motor = dir.join("big.json");
-    std::fs::write(
-        &motor,
+    let (motor, truth) = motor_file(
+        &dir,
+        "big.json",
         r#"{"R":0.05,"L":0.01,"k":1.0,"f":0.01,"J":50.0,"Ts":0.5}"#,
-    )
-    .unwrap();
-    let truth = [
-        ("R", 0.05),
-        ("L", 0.01),
-        ("k", 1.0),
-        ("f", 0.01),
-        ("J", 50.0),
-        ("Ts", 0.5),
-    ];
+    );
     let record = |name: &str, volts: &str, seed: &str, range: Option<&str>| {
         let path = dir.join(name);
         let mut args = vec![

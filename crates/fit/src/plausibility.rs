@@ -42,6 +42,20 @@ pub enum Refusal {
     /// The parameter covariance could not be computed (a singular Jacobian: some parameter
     /// does not change the model's output), so there are no intervals.
     NoIntervals,
+    /// No intervals, because a friction parameter went to a vanishing share of its scale
+    /// (Ts of the largest motor torque k·|I|, f of the electrical damping k²/R), where it no
+    /// longer acts on the records: the fit ran into a wrong minimum or the records show no
+    /// such friction.
+    Vanished {
+        /// `f` or `Ts`.
+        parameter: &'static str,
+        /// Its value (SI unit).
+        value: f64,
+        /// Its SI unit.
+        unit: &'static str,
+        /// The value over its scale.
+        share: f64,
+    },
     /// A parameter's 95 % interval is wider than the value itself (it reaches zero): the
     /// records do not determine it, and a linearised interval that wide is no longer honest.
     Undetermined {
@@ -70,6 +84,17 @@ impl fmt::Display for Refusal {
             Refusal::Implausible { reason } => write!(f, "physically impossible for these records: {reason}"),
             Refusal::NoIntervals => f.write_str(
                 "the 95 % intervals cannot be computed (singular Jacobian: some parameter does not act on the records)",
+            ),
+            Refusal::Vanished {
+                parameter,
+                value,
+                unit,
+                share,
+            } => write!(
+                f,
+                "{parameter} went to {value:.3e} {unit} ({share:.1e} of its scale), where it no longer acts on the \
+                 records, so no interval can be computed: the fit found a wrong minimum (a start nearer the truth \
+                 may help: identify --record … --start FILE.json), or the records show no such friction",
             ),
             Refusal::Undetermined {
                 parameter,
@@ -135,9 +160,35 @@ pub(crate) fn assess_parts(
     }
     let p = params;
     let Some(ci) = ci95 else {
-        return Some(Refusal::NoIntervals);
+        return Some(vanished(p, facts).unwrap_or(Refusal::NoIntervals));
     };
     intervals_refusal(p, ci, effects)
+}
+
+/// A share of its scale below which a friction parameter has vanished ([`Refusal::Vanished`]).
+const VANISHED_SHARE: f64 = 1e-12;
+
+/// The friction parameter of `p` that has vanished, if one has: Ts below [`VANISHED_SHARE`] of
+/// the largest motor torque `k·|I|` of records with `facts`, or f below that share of the
+/// electrical damping `k²/R`. In the fit's coordinate `ln p` such a parameter's column of the
+/// Jacobian is `p ∂r/∂p`, zero to rounding: the cause of a singular Jacobian, to be named.
+fn vanished(p: &MotorParams, facts: &RecordFacts) -> Option<Refusal> {
+    let torque = p.k_nm_per_a * facts.peak_current_a;
+    let damping = p.k_nm_per_a.powi(2) / p.r_ohm;
+    [
+        ("Ts", p.ts_nm, "N·m", torque),
+        ("f", p.f_nms_per_rad, "N·m·s/rad", damping),
+    ]
+    .into_iter()
+    .find_map(|(parameter, value, unit, scale)| {
+        let share = value / scale;
+        (scale > 0.0 && share < VANISHED_SHARE).then_some(Refusal::Vanished {
+            parameter,
+            value,
+            unit,
+            share,
+        })
+    })
 }
 
 /// Why `params` cannot be the motor of records with `facts`, if they cannot: a Coulomb torque
@@ -318,6 +369,28 @@ mod tests {
             assess_parts(&paper(), Some(&ci(&paper(), 1e-9)), &[], &q, &facts()),
             None
         );
+    }
+
+    #[test]
+    fn a_vanished_friction_is_named_as_the_cause_of_missing_intervals() {
+        let q = [quality(98.4)];
+        assert_eq!(
+            assess_parts(&paper(), None, &[], &q, &facts()),
+            Some(Refusal::NoIntervals)
+        );
+        let gone = MotorParams::new(0.3, 0.3, 0.15, 0.05, 1.0, 8e-34).unwrap();
+        let refusal = assess_parts(&gone, None, &[], &q, &facts()).expect("refused");
+        assert!(
+            matches!(
+                refusal,
+                Refusal::Vanished {
+                    parameter: "Ts",
+                    ..
+                }
+            ),
+            "{refusal:?}"
+        );
+        assert!(refusal.to_string().starts_with("Ts went to 8.000e-34 N·m"));
     }
 
     #[test]

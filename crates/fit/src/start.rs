@@ -122,12 +122,16 @@ pub fn steady_state_start(
         .iter()
         .position(|w| w.abs() >= target.abs())
         .map_or(f64::NAN, |i| high.t_first + i as f64 * high.dt);
+    // A speed past 63 % of its steady value at the first sample after the step: J is below
+    // what the record resolves (as L above), and the rise is taken as half a period.
+    let rise = if rise <= 0.0 { 0.5 * high.dt } else { rise };
     let j = rise * (r * f + k * k) / r;
+    // R, k, f and Ts as the steady states give them, settled: a motor they refuse is one the
+    // nominal model cannot explain (an unmodelled effect), a failed identification.
     MotorParams::new(r, l, k, f, j, ts).map_err(|e| {
-        unsettled().unwrap_or_else(|| {
-            bad(format!(
-                "{e} (steady currents {ih:.4} / {il:.4} A, speeds {oh:.4} / {ol:.4} rad/s)"
-            ))
+        unsettled().unwrap_or(FitError::Model {
+            context: "steady-state start (Eqs. (5), (2), (10))",
+            source: e,
         })
     })
 }

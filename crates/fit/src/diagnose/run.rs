@@ -1153,7 +1153,7 @@ fn candidate_start(
 /// have) is not a model to build on.
 fn diagnosable(refusal: &crate::Refusal, kind: Option<EffectKind>) -> bool {
     match refusal {
-        crate::Refusal::NoIntervals => true,
+        crate::Refusal::NoIntervals | crate::Refusal::Vanished { .. } => true,
         crate::Refusal::WorseThanConstant { .. } => kind.is_none(),
         crate::Refusal::Undetermined { parameter, .. } => {
             PARAM_NAMES.contains(parameter)
