@@ -673,18 +673,11 @@ fn a_current_whose_noise_is_clipped_at_a_zero_amp_rail_is_refused() {
             volts,
             "--duration",
             "60",
-            "--adc-bits",
-            "10",
-            "--noise-lsb",
-            "1",
-            "--encoder-cpr",
-            "2000",
-            "--speed-from",
-            "encoder",
             "--seed",
             seed,
             "--quiet",
         ];
+        args.extend(LOGGER);
         if let Some(r) = range {
             args.extend(["--range-current", r]);
         }
