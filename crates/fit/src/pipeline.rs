@@ -249,7 +249,9 @@ impl StepPairIdentification {
 /// Identifies a step pair, the high-voltage step first: the paper's method (unless clipped
 /// samples rule it out), then with [`StepMethod::Full`] the full model (fitting the step
 /// heights and instants as uncertain inputs, [`identify_full_with_inputs`]) started from it, or
-/// from the steady states ([`steady_state_start`]) where it does not apply. Records whose
+/// from the steady states ([`steady_state_start`]) where it does not apply — and again from
+/// the steady states when the fit from the paper's result is refused
+/// ([`StepRoute::FullFromSteadyStatesAfterPaper`], kept only if that fit is accepted). Records whose
 /// voltage comes back down ([`StepRecord::whole`]) are fitted whole, rise and fall, by output
 /// error from rest ([`identify_output_error_with_inputs`], the levels and their instants as
 /// uncertain inputs); a pair with one such record and one without is refused.
