@@ -158,7 +158,7 @@ pub fn estimate_level(samples: &[f64], scale: &VoltageScale) -> Option<LevelEsti
             });
         }
     }
-    let bias = quantisation_bias_variance(quantised_noise_sigma(samples, q), q);
+    let bias = quantisation_bias_variance(noise_sigma_of_counts(&counts, s2, q), q);
     Some(LevelEstimate {
         volts: mean,
         variance_v2: s2 / nf + bias,
@@ -409,14 +409,19 @@ fn code_counts(samples: &[f64], q: f64) -> (f64, f64, Vec<f64>) {
 /// ([`quantisation_bias_variance`]) is then four times too large. Sheppard's value where
 /// the likelihood has no maximum.
 fn quantised_noise_sigma(samples: &[f64], q: f64) -> f64 {
-    let (_, _, counts) = code_counts(samples, q);
     let n = samples.len() as f64;
     let mean = samples.iter().sum::<f64>() / n;
     let s2 = samples.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+    noise_sigma_of_counts(&code_counts(samples, q).2, s2, q)
+}
+
+/// [`quantised_noise_sigma`] of readings already counted per code (`counts`, their sample
+/// variance `s2`).
+fn noise_sigma_of_counts(counts: &[f64], s2: f64, q: f64) -> f64 {
     let sheppard = (s2 - q * q / 12.0).max(0.0).sqrt();
     match counts.iter().filter(|&&c| c > 0.0).count() {
         0 | 1 => 0.0,
-        _ => censored_fit(&counts, false, false).map_or(sheppard, |(_, _, sigma)| sigma * q),
+        _ => censored_fit(counts, false, false).map_or(sheppard, |(_, _, sigma)| sigma * q),
     }
 }
 
