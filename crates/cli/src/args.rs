@@ -327,6 +327,10 @@ pub struct IdentifyArgs {
     /// write DIR/summary.csv and DIR/summary.json.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["high", "low", "steady", "record"])]
     pub batch: Option<PathBuf>,
+    /// With --batch: a motor folder still fitting after this long is set aside as an error
+    /// row of the summary, and the batch goes on [s; default 600].
+    #[arg(long, value_name = "SECONDS", requires = "batch")]
+    pub folder_limit: Option<f64>,
     /// Column names of a file from another tool: t=HEADER,current=HEADER,position=HEADER,...
     #[arg(long, value_name = "NAME=HEADER,...")]
     pub columns: Option<String>,

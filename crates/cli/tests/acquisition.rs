@@ -100,6 +100,21 @@ fn acquire(port: &str, volts: &str, path: &Path, extra: &[&str]) -> std::process
     motorid(&args)
 }
 
+/// `acquire` of a `volts` step for `seconds` to `path`.
+fn acquire_for(port: &str, volts: &str, seconds: &str, path: &Path) -> std::process::Output {
+    motorid(&[
+        "acquire",
+        "--port",
+        port,
+        "--voltage",
+        volts,
+        "--duration",
+        seconds,
+        "-o",
+        path.to_str().unwrap(),
+    ])
+}
+
 /// Acceptance 1 of the acquisition issue: a 40 V and a 2.5 V step of the paper's motor
 /// acquired through the emulator over a pseudo-terminal equal `motorid simulate` with the same
 /// measurement settings sample for sample, and identify the paper's motor within its intervals.
@@ -153,6 +168,58 @@ fn acquired_records_equal_simulate_and_identify_the_paper_motor() {
         let (lo, hi) = (ci[0].as_f64().unwrap(), ci[1].as_f64().unwrap());
         assert!(lo <= truth && truth <= hi, "{name}: [{lo}, {hi}]");
     }
+}
+
+/// `acquire -o` to a FIFO streams the record to its reader, and to a device node writes it in
+/// place: neither is replaced by a regular file (issue "No silent wrong answers", item 1).
+#[cfg(unix)]
+#[test]
+fn acquire_writes_a_fifo_and_a_device_node_in_place() {
+    use std::os::unix::ffi::OsStrExt;
+    use std::os::unix::fs::{FileTypeExt, MetadataExt};
+    let dir = scratch("acquire-special");
+    let c_path = |p: &Path| std::ffi::CString::new(p.as_os_str().as_bytes()).unwrap();
+    let emulator = Emulator::start(&[]);
+    let fifo = dir.join("fifo");
+    // SAFETY: a valid NUL-terminated path.
+    assert_eq!(unsafe { libc::mkfifo(c_path(&fifo).as_ptr(), 0o644) }, 0);
+    let (sent, received) = std::sync::mpsc::channel();
+    {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || sent.send(std::fs::read_to_string(fifo).unwrap()));
+    }
+    let out = acquire_for(&emulator.port, "2.5", "1", &fifo);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = received
+        .recv_timeout(std::time::Duration::from_secs(30))
+        .expect("the FIFO's reader got nothing: was the FIFO replaced?");
+    let data = text.lines().filter(|l| !l.starts_with('#')).count();
+    assert_eq!(data, 1 + 1001, "header and 1001 samples: {text}");
+    assert!(std::fs::symlink_metadata(&fifo)
+        .unwrap()
+        .file_type()
+        .is_fifo());
+    let node = dir.join("null");
+    let dev = libc::makedev(1, 3);
+    // SAFETY: a valid NUL-terminated path.
+    if unsafe { libc::mknod(c_path(&node).as_ptr(), libc::S_IFCHR | 0o666, dev) } != 0 {
+        eprintln!(
+            "device part skipped: mknod of a character device is not permitted here ({})",
+            std::io::Error::last_os_error()
+        );
+        return;
+    }
+    let out = acquire_for(&emulator.port, "2.5", "1", &node);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let meta = std::fs::symlink_metadata(&node).unwrap();
+    assert!(meta.file_type().is_char_device(), "the device was replaced");
+    assert_eq!(meta.rdev(), dev);
+    let mut left: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    left.sort();
+    assert_eq!(left, ["fifo", "null"]);
 }
 
 /// Acceptance 2: bytes corrupted (bit-error rate 1e-3) or dropped (1e-3) on the line: the

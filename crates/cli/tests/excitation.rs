@@ -3,7 +3,10 @@
 
 mod common;
 
-use common::{motorid, scratch, simulate_to, stderr, stdout, LOGGER, PAPER_TRUTH as TRUTH};
+use common::{
+    assert_bad_input, motorid, motorid_within, scratch, simulate_to, stderr, stdout, LOGGER,
+    PAPER_TRUTH as TRUTH,
+};
 
 /// Every parameter of the JSON report contains the paper motor's value in its 95 % interval.
 fn assert_within_intervals(json: &str) {
@@ -177,5 +180,44 @@ fn batch_identifies_a_fleet_and_reports_broken_folders() {
     assert!(
         row.contains("high.csv:2: column `current`: `x` is not a number"),
         "{row}"
+    );
+    // A folder still fitting after --folder-limit is set aside as an error row; the batch
+    // ends and writes its summary (a folder that hung once stalled it at 4/5 for ever).
+    std::fs::remove_file(fleet.join("summary.csv")).unwrap();
+    let out = motorid_within(
+        &[
+            "identify",
+            "--batch",
+            fleet.to_str().unwrap(),
+            "--folder-limit",
+            "0.000001",
+            "-q",
+        ],
+        std::time::Duration::from_secs(60),
+    )
+    .expect("the batch ends although no folder finishes within its limit");
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    let text = stdout(&out);
+    assert!(text.contains("14 motors: 0 identified"), "{text}");
+    let csv = std::fs::read_to_string(fleet.join("summary.csv")).unwrap();
+    let row = csv.lines().find(|l| l.starts_with("motor_hv")).unwrap();
+    assert!(
+        row.contains("no result within --folder-limit 0.000001 s: set aside"),
+        "{row}"
+    );
+    // Only with --batch, and positive.
+    assert_bad_input(
+        &["identify", "--record", "x.csv", "--folder-limit", "3"],
+        "--folder-limit is for --batch DIR",
+    );
+    assert_bad_input(
+        &[
+            "identify",
+            "--batch",
+            fleet.to_str().unwrap(),
+            "--folder-limit",
+            "0",
+        ],
+        "--folder-limit 0: expected a positive number of seconds",
     );
 }

@@ -119,6 +119,19 @@ fn a_fifo_is_streamed_to_its_reader() {
 }
 
 #[test]
+fn a_dash_writes_the_record_to_standard_output_and_no_file() {
+    let dir = scratch("out-dash");
+    let out = Command::new(env!("CARGO_BIN_EXE_motorid"))
+        .args(["simulate", "--voltage", "1", "--duration", "1", "-o", "-"])
+        .current_dir(&dir)
+        .output()
+        .expect("the motorid binary runs");
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_record(&stdout(&out), 1.0);
+    assert!(names(&dir).is_empty(), "files written: {:?}", names(&dir));
+}
+
+#[test]
 fn a_device_node_is_written_in_place() {
     let dir = scratch("out-device");
     let node = dir.join("null");

@@ -63,6 +63,10 @@ const MAX_HALF_WIDTHS: f64 = 10.0;
 /// An `identify` still running after this long is a hang (the README's 140,001-sample
 /// output-error fit takes 1.1 s; at most `HEAVY_MAX_SAMPLES` samples a record here).
 const IDENTIFY_LIMIT: std::time::Duration = std::time::Duration::from_secs(60);
+/// Share of the accepted cases (clean records: no effect is simulated) whose model check may
+/// still say that the model misses something: the check's family-wise false-alarm rate is
+/// 1 % a call, and this bound is five times that.
+const MAX_MODEL_CHECK_ALARMS: f64 = 0.05;
 /// The parameters, in the order of the JSON's correlation matrix.
 const NAMES: [&str; 6] = ["R", "L", "k", "f", "J", "Ts"];
 
@@ -309,6 +313,9 @@ struct Outcome {
     exit: Option<i32>,
     /// Per parameter: the interval contains the truth (exit 0 only).
     covered: [bool; 6],
+    /// Exit 0 and the model check says the model misses something (a false alarm: the
+    /// records are of the nominal model).
+    alarm: bool,
     /// Problems that break the property (exit 0 far off, no interval, a panic, ...).
     violations: Vec<String>,
     /// Exit 2/3: the first line of the error; exit 0: the intervals that miss the truth.
@@ -364,6 +371,7 @@ fn run_case(case: &Case, dir: &Path) -> Outcome {
             return Outcome {
                 exit: None,
                 covered: [false; 6],
+                alarm: false,
                 violations,
                 note: String::new(),
                 commands,
@@ -401,6 +409,7 @@ fn run_case(case: &Case, dir: &Path) -> Outcome {
         return Outcome {
             exit: None,
             covered: [false; 6],
+            alarm: false,
             violations,
             note: String::new(),
             commands,
@@ -410,6 +419,7 @@ fn run_case(case: &Case, dir: &Path) -> Outcome {
     let exit = out.status.code();
     let err = stderr(&out);
     let mut covered = [false; 6];
+    let mut alarm = false;
     let mut note = String::new();
     if err.contains("panicked") {
         violations.push(format!("panicked: {}", err.trim()));
@@ -417,6 +427,17 @@ fn run_case(case: &Case, dir: &Path) -> Outcome {
     match exit {
         Some(0) => {
             let v: Value = serde_json::from_str(&stdout(&out)).unwrap_or(Value::Null);
+            // A check not made (records too short to localise) says why, and is no alarm.
+            match v["model_check"]["made"].as_bool() {
+                Some(made) => alarm = made && v["model_check"]["model_misses"] == true,
+                None => violations.push(format!(
+                    "exit 0 without a model check: {}",
+                    v["model_check"]
+                )),
+            }
+            if alarm {
+                write!(note, " model check: {};", v["model_check"]["findings"][0]).unwrap();
+            }
             for (i, name) in NAMES.iter().enumerate() {
                 let p = &v["parameters"][name];
                 let truth = case.motor[i];
@@ -460,6 +481,7 @@ fn run_case(case: &Case, dir: &Path) -> Outcome {
     Outcome {
         exit,
         covered,
+        alarm,
         violations,
         note,
         commands,
@@ -490,6 +512,7 @@ fn identify_is_right_within_its_intervals_or_refuses() {
     let mut exits = std::collections::BTreeMap::<String, usize>::new();
     let mut accepted = 0usize;
     let mut covered = [0usize; 6];
+    let mut alarms = 0usize;
     for &index in &indices {
         let case = Case::draw(index, max_samples);
         let dir = root.join(format!("case{index}"));
@@ -505,6 +528,10 @@ fn identify_is_right_within_its_intervals_or_refuses() {
         );
         if outcome.exit == Some(0) {
             accepted += 1;
+            alarms += usize::from(outcome.alarm);
+            if outcome.alarm {
+                eprintln!("  model check flagged it; reproduce:\n{}", outcome.commands);
+            }
             for (n, c) in covered.iter_mut().zip(outcome.covered) {
                 *n += usize::from(c);
             }
@@ -534,6 +561,12 @@ fn identify_is_right_within_its_intervals_or_refuses() {
                 "{name}: {n} of {accepted} intervals contain the truth, below {MIN_COVERAGE}"
             ));
         }
+    }
+    eprintln!("  model check: {alarms} of {accepted} accepted cases flagged (false alarms)");
+    if alarms as f64 > MAX_MODEL_CHECK_ALARMS * accepted as f64 {
+        coverage_failures.push(format!(
+            "the model check flagged {alarms} of {accepted} accepted cases of the nominal model, above {MAX_MODEL_CHECK_ALARMS}"
+        ));
     }
     if accepted < MIN_ACCEPTED {
         eprintln!("coverage not judged: fewer than {MIN_ACCEPTED} accepted cases");

@@ -9,8 +9,10 @@
 
 use std::fmt;
 
-use motor_model::MotorParams;
+use motor_model::{Input, MotorParams};
 
+use crate::diagnose::localise::{Localisation, LocaliseSettings};
+use crate::diagnose::localise_fit;
 use crate::error::FitError;
 use crate::full_model::{identify_full_with_inputs, FullFit, StepTest, PARAM_NAMES, PARAM_UNITS};
 use crate::input_uncertainty::{LevelPrior, StepInputs};
@@ -227,6 +229,47 @@ impl StepPairIdentification {
         self.params()
             .map(|p| parameter_estimates(&p, ci))
             .unwrap_or_default()
+    }
+
+    /// Where the full fit's residual on the pair it was fitted to (`high`, `low` as given to
+    /// [`identify_step_pair`], named by `names`) exceeds the records' own noise floor
+    /// ([`localise_fit`] with [`LocaliseSettings::model_check`]): a significant finding says the records show something the motor model does not,
+    /// and the intervals, which assume a complete model, do not hold the bias it leaves.
+    /// Each step record is taken from its step on at its measured height (or whole, rise and
+    /// return, where the full fit took it whole). `None` without a full fit.
+    pub fn localise(
+        &self,
+        high: &StepRecord<'_>,
+        low: &StepRecord<'_>,
+        names: &[&str],
+    ) -> Option<Result<Localisation, FitError>> {
+        let full = self.full.as_ref()?;
+        let steps = [high, low].map(|s| Input::Step {
+            volts: s.test.volts,
+            at_s: 0.0,
+        });
+        let records: Vec<ExcitedRecord<'_>> = match (high.whole, low.whole) {
+            (Some(h), Some(l)) => vec![h.record, l.record],
+            _ => [high, low]
+                .iter()
+                .zip(&steps)
+                .map(|(s, input)| ExcitedRecord {
+                    input,
+                    dt: s.test.dt,
+                    current: s.test.current,
+                    speed: s.test.speed,
+                    position: s.test.position,
+                    exclude_current: s.test.exclude_current,
+                    exclude_speed: s.test.exclude_speed,
+                })
+                .collect(),
+        };
+        Some(localise_fit(
+            &records,
+            &full.fitted,
+            names,
+            &LocaliseSettings::model_check(),
+        ))
     }
 
     /// The note to give with the result, a sentence: why the full fit started from the steady

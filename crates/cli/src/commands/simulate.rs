@@ -1,106 +1,14 @@
 //! `motorid simulate`: a record of a simulated test.
 
-use std::io::IsTerminal;
-use std::sync::{Arc, Condvar, Mutex};
-use std::time::{Duration, Instant};
-
 use anyhow::Result;
 use motor_model::{Effects, Input, MotorParams, Simulator, StepResponse, Trace};
 
 use crate::args::{SimulateArgs, SolverArg};
+use crate::progress::Phases;
 use crate::record_csv;
 use crate::settings;
 use crate::settings::MeasurementOptions;
 use crate::BadInput;
-
-/// Time a run may take before it reports progress: shorter runs stay silent.
-const PROGRESS_AFTER: Duration = Duration::from_secs(1);
-/// Interval between progress reports.
-const PROGRESS_EVERY: Duration = Duration::from_secs(1);
-
-/// The phase a long `simulate` is in, reported on standard error by a thread once the run has
-/// taken [`PROGRESS_AFTER`], then every [`PROGRESS_EVERY`] and at each new phase: one line
-/// rewritten on a terminal, plain lines otherwise. Dropping it ends the report.
-struct Phases {
-    shared: Arc<(Mutex<(String, bool)>, Condvar)>,
-    reporter: Option<std::thread::JoinHandle<()>>,
-}
-
-impl Phases {
-    /// Starts reporting (nothing at all when `quiet`).
-    fn start(quiet: bool) -> Self {
-        let shared = Arc::new((Mutex::new((String::new(), false)), Condvar::new()));
-        let reporter = (!quiet).then(|| {
-            let shared = Arc::clone(&shared);
-            std::thread::spawn(move || report(&shared))
-        });
-        Phases { shared, reporter }
-    }
-
-    /// Enters the phase described by `what`.
-    fn enter(&self, what: String) {
-        let (state, changed) = &*self.shared;
-        if let Ok(mut s) = state.lock() {
-            s.0 = what;
-        }
-        changed.notify_all();
-    }
-}
-
-impl Drop for Phases {
-    fn drop(&mut self) {
-        let (state, changed) = &*self.shared;
-        if let Ok(mut s) = state.lock() {
-            s.1 = true;
-        }
-        changed.notify_all();
-        if let Some(reporter) = self.reporter.take() {
-            let _ = reporter.join();
-        }
-    }
-}
-
-/// The reporting thread of [`Phases`].
-fn report(shared: &(Mutex<(String, bool)>, Condvar)) {
-    let (state, changed) = shared;
-    let started = Instant::now();
-    let terminal = std::io::stderr().is_terminal();
-    let mut shown: Option<(String, Instant)> = None;
-    let Ok(mut s) = state.lock() else { return };
-    loop {
-        let wait = match &shown {
-            None => PROGRESS_AFTER.saturating_sub(started.elapsed()),
-            Some((_, at)) => PROGRESS_EVERY.saturating_sub(at.elapsed()),
-        };
-        s = match changed.wait_timeout(s, wait.max(Duration::from_millis(1))) {
-            Ok((guard, _)) => guard,
-            Err(_) => return,
-        };
-        if s.1 {
-            break;
-        }
-        let due = match &shown {
-            None => started.elapsed() >= PROGRESS_AFTER,
-            Some((phase, at)) => *phase != s.0 || at.elapsed() >= PROGRESS_EVERY,
-        };
-        if due && !s.0.is_empty() {
-            let line = format!(
-                "  simulate: {} ({:.1} s)",
-                s.0,
-                started.elapsed().as_secs_f64()
-            );
-            if terminal {
-                eprint!("\r{line:<78}");
-            } else {
-                eprintln!("{line}");
-            }
-            shown = Some((s.0.clone(), Instant::now()));
-        }
-    }
-    if terminal && shown.is_some() {
-        eprintln!();
-    }
-}
 
 /// The solver `--solver` asks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -197,7 +105,7 @@ pub fn trace(
 pub fn run(a: &Settings) -> Result<()> {
     let (motor, input, effects) = (&a.motor, &a.input, a.effects);
     let (duration_s, rate_hz) = (a.duration_s, a.rate_hz);
-    let phases = Phases::start(a.quiet);
+    let phases = Phases::start("simulate", a.quiet);
     let samples = (duration_s * rate_hz).floor() as u64 + 1;
     let analytic = matches!(
         (a.solver, input),

@@ -42,8 +42,8 @@ pub use inverse::{
 };
 pub use propose::{separating_test, SeparatingTest};
 pub use run::{
-    diagnose, Assessment, CandidateReport, DiagnoseError, DiagnoseProgress, DiagnoseSettings,
-    Diagnosis, EffectParam, ParamShift, Stage,
+    diagnose, localise_fit, Assessment, CandidateReport, DiagnoseError, DiagnoseProgress,
+    DiagnoseSettings, Diagnosis, EffectParam, ParamShift, Stage,
 };
 
 /// The name of each of `n` records in reports: `names[k]`, or `record k+1` (counted from 1)

@@ -1304,7 +1304,7 @@ pub fn diagnose(
     // The noise level of each channel, as the nominal fit weighted it: the same for every
     // candidate, so that their held-out errors compare.
     let sigmas = channel_scales(&nominal, &nominal_all);
-    let localisation = localise_all(&all, &nominal_all, names, &settings.localise)?;
+    let localisation = localise_fit(&all, &nominal_all, names, &settings.localise)?;
 
     let mut stages: Vec<Stage> = Vec::new();
     let mut base = Base {
@@ -1365,8 +1365,17 @@ pub fn diagnose(
     })
 }
 
-/// The localisation of the nominal model on every record.
-fn localise_all(
+/// The localisation ([`localise`]) of a fit's residual on the records it was fitted to:
+/// `fitted` are the fit's channels ([`crate::FullFit::fitted`], `record` indexing `all`), the
+/// records give the voltage, current, speed and angle that place each sample in its phase,
+/// operating region and shaft angle (a record without an encoder gets the integral of its
+/// tachometer speed). A channel with samples left out of the fit (clipped at a rail) is not
+/// localised. `names` label the records (`record k` where missing).
+///
+/// `motorid identify` runs it on every accepted fit: a significant finding means the records
+/// show what the model does not (an unmodelled effect), so the intervals, which assume a
+/// complete model, do not hold the bias it leaves.
+pub fn localise_fit(
     all: &[ExcitedRecord<'_>],
     fitted: &[FittedChannel],
     names: &[&str],

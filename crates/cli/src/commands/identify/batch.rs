@@ -69,19 +69,66 @@ fn motor_folders(dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(out)
 }
 
+/// The folder's name, for the summary.
+fn folder_name(folder: &Path) -> String {
+    folder
+        .file_name()
+        .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
+}
+
+/// Whether the folder holds a step pair (`high.csv` and `low.csv`).
+fn has_step_pair(folder: &Path) -> bool {
+    folder.join("high.csv").exists() && folder.join("low.csv").exists()
+}
+
+/// [`identify_folder`] on a thread of its own, set aside after `limit`: the folder is then an
+/// error row, and the batch goes on (the fit itself is bounded by its iterations and ends in
+/// the background, or with the process).
+fn identify_folder_within(folder: &Path, limit: std::time::Duration) -> Row {
+    let (tx, rx) = std::sync::mpsc::channel();
+    let owned = folder.to_path_buf();
+    let spawned = std::thread::Builder::new()
+        .name(format!("folder {}", folder_name(folder)))
+        .spawn(move || tx.send(identify_folder(&owned)).ok());
+    if spawned.is_err() {
+        // No thread to spare: fitted here, unbounded but for its iterations.
+        return identify_folder(folder);
+    }
+    match rx.recv_timeout(limit) {
+        Ok(row) => row,
+        Err(_) => Row {
+            name: folder_name(folder),
+            method: if has_step_pair(folder) {
+                "full"
+            } else {
+                "output_error"
+            },
+            outcome: Outcome::Failed {
+                bad_input: false,
+                message: format!(
+                    "{}: no result within --folder-limit {} s: set aside (raise --folder-limit, or identify the folder on its own to see where the time goes)",
+                    folder.display(),
+                    limit.as_secs_f64()
+                ),
+            },
+            truth: None,
+            against: None,
+            seconds: limit.as_secs_f64(),
+        },
+    }
+}
+
 /// Identifies one motor folder.
 fn identify_folder(folder: &Path) -> Row {
     let started = std::time::Instant::now();
-    let name = folder
-        .file_name()
-        .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+    let name = folder_name(folder);
     let truth_path = folder.join("motor.json");
     let truth = truth_path
         .exists()
         .then(|| settings::motor(truth_path.to_str().unwrap_or_default()).ok())
         .flatten();
     let (high, low) = (folder.join("high.csv"), folder.join("low.csv"));
-    let (method, result): (&'static str, Result<FullFit>) = if high.exists() && low.exists() {
+    let (method, result): (&'static str, Result<FullFit>) = if has_step_pair(folder) {
         let fitted = (|| {
             let (hv, lv) = (
                 load_step(&high, &ColumnMap::default(), true)?,
@@ -228,7 +275,7 @@ pub fn run(a: &Settings, dir: &Path) -> Result<()> {
     let progress = Jobs::new(n, "motors", a.quiet);
     let rows = parallel::map(
         n,
-        |i| identify_folder(&folders[i]),
+        |i| identify_folder_within(&folders[i], a.folder_limit),
         |done| progress.done(done, String::new),
     );
     drop(progress);

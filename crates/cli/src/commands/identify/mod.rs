@@ -4,6 +4,7 @@ mod batch;
 mod kinds;
 
 use anyhow::Result;
+use fit::diagnose::localise::{Localisation, LocaliseSettings};
 use fit::{
     fit_apparent_resistance, identify_inverse_model_pooled, parameter_estimates, record_speed,
     steady_value, torque_constant, voltage_input, ChannelQuality, Drive, ExcitedRecord, FullFit,
@@ -17,6 +18,7 @@ use std::path::PathBuf;
 
 use crate::args::{AxisArg, DriveArg, IdentifyArgs};
 use crate::figures::FigureRecord;
+use crate::progress::Phases;
 use crate::record_csv::{read_loaded, read_loaded_current_optional, ColumnMap};
 use crate::settings;
 use crate::steps::{
@@ -60,6 +62,10 @@ pub enum Axis {
     Linear,
 }
 
+/// How long one motor folder of `--batch` may take by default \[s\]: ten minutes, far beyond
+/// the few seconds a folder of logger records takes.
+const DEFAULT_FOLDER_LIMIT_S: f64 = 600.0;
+
 /// What `motorid identify` identifies and how, validated from its arguments.
 #[derive(Debug, Clone)]
 pub struct Settings {
@@ -93,6 +99,9 @@ pub struct Settings {
     pub decimation: usize,
     /// How each record's simulation starts; `None`: told from its first samples.
     pub initial_state: Option<fit::InitialState>,
+    /// `--folder-limit`: how long one motor folder of `--batch` may take before it is set
+    /// aside as an error row.
+    pub folder_limit: std::time::Duration,
 }
 
 impl Settings {
@@ -154,6 +163,21 @@ impl Settings {
             )
             .into());
         };
+        if a.folder_limit.is_some() && a.batch.is_none() {
+            return Err(BadInput(
+                "--folder-limit is for --batch DIR: one identification is bounded by its fit's iterations".into(),
+            )
+            .into());
+        }
+        let limit_s = a.folder_limit.unwrap_or(DEFAULT_FOLDER_LIMIT_S);
+        let folder_limit = std::time::Duration::try_from_secs_f64(limit_s)
+            .ok()
+            .filter(|d| !d.is_zero())
+            .ok_or_else(|| {
+                BadInput(format!(
+                    "--folder-limit {limit_s}: expected a positive number of seconds"
+                ))
+            })?;
         let columns = match &a.columns {
             Some(text) => ColumnMap::parse(text)?,
             None => ColumnMap::default(),
@@ -183,6 +207,7 @@ impl Settings {
             cutoff_hz: a.cutoff,
             decimation: a.decimation,
             initial_state: settings::initial_state(a.initial_state),
+            folder_limit,
         })
     }
 }
@@ -690,22 +715,18 @@ pub fn run(a: &Settings) -> Result<()> {
         Source::Pair { high, low } => (high, low),
     };
     let map = &a.columns;
-    let clock = std::time::Instant::now();
     let bytes: u64 = [high, low]
         .iter()
         .filter_map(|p| std::fs::metadata(p).ok())
         .map(|m| m.len())
         .sum();
-    // About a second of reading on this kind of machine.
-    let long = bytes > 50_000_000 && !a.quiet;
-    if long {
-        eprintln!(
-            "reading {} and {} ({:.0} MB)…",
-            high.display(),
-            low.display(),
-            bytes as f64 / 1e6
-        );
-    }
+    let phases = Phases::start("identify", a.quiet);
+    phases.enter(format!(
+        "reading {} and {} ({:.0} MB)",
+        high.display(),
+        low.display(),
+        bytes as f64 / 1e6
+    ));
     let (hv, lv) = load_step_pair(high, low, map, a.quiet)?;
     let kind = RecordKind::decide(
         common_channels(&[hv.channels, lv.channels]),
@@ -722,6 +743,7 @@ pub fn run(a: &Settings) -> Result<()> {
         if !a.quiet && !a.json {
             eprintln!("note: {note}");
         }
+        drop(phases);
         return run_output_error(a, &[high.clone(), low.clone()], Some(&note));
     }
     if !a.quiet {
@@ -736,17 +758,16 @@ pub fn run(a: &Settings) -> Result<()> {
         }
     }
     let files = [hv.path.as_str(), lv.path.as_str()];
-    if long {
-        eprintln!(
-            "read in {:.1} s; fitting {} samples…",
-            clock.elapsed().as_secs_f64(),
-            hv.current.len() + lv.current.len()
-        );
-    }
+    phases.enter(format!(
+        "fitting {} samples",
+        hv.current.len() + lv.current.len()
+    ));
     let result = identify_pair(&hv, &lv, a.method)?;
-    if long {
-        eprintln!("done in {:.1} s", clock.elapsed().as_secs_f64());
-    }
+    phases.enter(MODEL_CHECK_PHASE.into());
+    let check = ModelCheck::of(result.full.as_ref(), || {
+        result.localise(&hv.step_record(), &lv.step_record(), &files)
+    });
+    drop(phases);
     let why = result.paper.as_ref().map_err(ToString::to_string);
     let paper = why.as_ref().copied().map_err(String::as_str);
     let method = result.route.method_name();
@@ -755,6 +776,9 @@ pub fn run(a: &Settings) -> Result<()> {
         let mut report = report_json(method, paper, full, &files);
         if let Some(obj) = report.as_object_mut() {
             obj.insert("record_kind".into(), kinds::kind_json(&kind));
+            if let Some(c) = &check {
+                obj.insert("model_check".into(), c.json());
+            }
         }
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -762,6 +786,13 @@ pub fn run(a: &Settings) -> Result<()> {
         let note = result.note();
         let whole = hv.whole.is_some() && lv.whole.is_some();
         print_table(method, whole, paper, full, &files, note.as_deref());
+        if let Some(c) = &check {
+            c.print(&format!(
+                "motorid diagnose --high {} --low {}",
+                high.display(),
+                low.display()
+            ));
+        }
     }
     if let (Some(dir), Some(f)) = (&a.plot, full) {
         let records = [&hv, &lv].map(|s| FigureRecord {
@@ -851,15 +882,11 @@ fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Resu
     }
     let given = a.start;
     let samples: usize = loaded.iter().map(|l| l.record.t.len()).sum();
-    let clock = std::time::Instant::now();
-    // About a second of fitting on this kind of machine: progress from there on.
-    let long = !a.quiet && samples >= 20_000;
-    if long {
-        eprintln!(
-            "fitting {} record(s), {samples} samples, by simulation (about 7 simulations per iteration)…",
-            loaded.len()
-        );
-    }
+    let phases = Phases::start("identify", a.quiet);
+    phases.enter(format!(
+        "fitting {} record(s), {samples} samples, by simulation (about 7 simulations per iteration)",
+        loaded.len()
+    ));
     let fitted = fit_excited_from(
         &loaded,
         a.initial_state,
@@ -868,6 +895,16 @@ fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Resu
         " (give a start with --start FILE.json)",
     )?;
     let (start, full) = (fitted.start, fitted.full);
+    phases.enter(MODEL_CHECK_PHASE.into());
+    let check = ModelCheck::of(Some(&full), || {
+        let records: Vec<ExcitedRecord> = loaded.iter().map(|l| l.excited()).collect();
+        Some(fit::diagnose::localise_fit(
+            &records,
+            &full.fitted,
+            &files,
+            &LocaliseSettings::model_check(),
+        ))
+    });
     let initial: Vec<(
         &str,
         &fit::DetectedInitialState,
@@ -878,13 +915,7 @@ fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Resu
         .enumerate()
         .map(|(k, (file, chosen))| (*file, chosen, full.initial_states.get(k)))
         .collect();
-    if long {
-        eprintln!(
-            "done in {:.1} s ({} iterations)",
-            clock.elapsed().as_secs_f64(),
-            full.iterations
-        );
-    }
+    drop(phases);
     if a.json {
         let mut report = report_json(
             "output_error",
@@ -914,6 +945,9 @@ fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Resu
                 obj.insert("note".into(), note.into());
             }
             obj.insert("record_kind".into(), kinds::kind_json(&kind));
+            if let Some(c) = &check {
+                obj.insert("model_check".into(), c.json());
+            }
         }
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -936,6 +970,13 @@ fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Resu
         if let Some(note) = note {
             println!("note: {note}");
         }
+        if let Some(c) = &check {
+            let records: Vec<String> = paths
+                .iter()
+                .map(|p| format!("--record {}", p.display()))
+                .collect();
+            c.print(&format!("motorid diagnose {}", records.join(" ")));
+        }
     }
     if let Some(dir) = &a.plot {
         let records: Vec<FigureRecord> = loaded
@@ -950,6 +991,74 @@ fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Resu
     }
     converged(Some(&full))
 }
+
+/// What the check of an accepted fit's residual against the records' own noise found
+/// ([`fit::diagnose::localise_fit`]): its significant findings in words, or why it was not
+/// made.
+struct ModelCheck(std::result::Result<Vec<String>, String>);
+
+impl ModelCheck {
+    /// The check of `full` when it is accepted (`None` otherwise: a refused fit has its own
+    /// reason), from the localisation `run` makes.
+    fn of(
+        full: Option<&FullFit>,
+        run: impl FnOnce() -> Option<std::result::Result<Localisation, fit::FitError>>,
+    ) -> Option<ModelCheck> {
+        if !full.is_some_and(FullFit::accepted) {
+            return None;
+        }
+        let found = run()?
+            .map(|l| {
+                l.significant_findings()
+                    .into_iter()
+                    .map(|f| f.text)
+                    .collect()
+            })
+            .map_err(|e| e.to_string());
+        Some(ModelCheck(found))
+    }
+
+    /// The `model_check` object of `--json`.
+    fn json(&self) -> Value {
+        match &self.0 {
+            Ok(found) => json!({
+                "made": true,
+                "alpha": LocaliseSettings::model_check().alpha,
+                "model_misses": !found.is_empty(),
+                "findings": found,
+            }),
+            Err(why) => json!({"made": false, "reason": why}),
+        }
+    }
+
+    /// The warning of the table when the residual is not the records' noise; `diagnose` is
+    /// the command that looks for the cause on the same records.
+    fn print(&self, diagnose: &str) {
+        match &self.0 {
+            Ok(found) if found.is_empty() => {}
+            Ok(found) => {
+                println!(
+                    "warning: the model misses something these records show — the residual is not their noise ({} finding(s) at a family-wise false-alarm level of {:e}):",
+                    found.len(),
+                    LocaliseSettings::model_check().alpha
+                );
+                for f in found.iter().take(MODEL_CHECK_SHOWN) {
+                    println!("  {f}");
+                }
+                println!(
+                    "  The values and intervals above assume a complete model: an unmodelled effect biases them beyond their intervals. `{diagnose}` names the effect and refits the motor with it."
+                );
+            }
+            Err(why) => println!("model check not made: {why}"),
+        }
+    }
+}
+
+/// The phase of the model check, for the progress on standard error.
+const MODEL_CHECK_PHASE: &str = "checking the residual against the records' noise";
+
+/// Findings of the model check printed in the table (`--json` gives them all).
+const MODEL_CHECK_SHOWN: usize = 4;
 
 /// The files of `paths`, comma-separated, for errors about all of them.
 fn shown_records(paths: &[PathBuf]) -> String {
