@@ -67,7 +67,12 @@
 //! evidence (`tested: false`): at constant speed the counts make a deterministic, periodic
 //! error, neither white nor flat in spectrum, whose sidebands put a speed ripple at other N per
 //! revolution. An encoder speed is judged on magnitudes only (whiteness, cross-correlation,
-//! spectrum and angle ripple are reported untested).
+//! spectrum and angle ripple are reported untested). So is an ADC channel whose floor is its
+//! quantiser (`q/√12` above the scatter and the second-difference noise: a noise-free or nearly
+//! noise-free ADC): its error is then a deterministic sawtooth of the signal, held for as many
+//! samples as the signal stays within one code, neither white nor flat in spectrum. On the
+//! paper's noise-free 10-bit step pair, the correct model's residual had Ljung–Box Q = 4·10⁵
+//! and spectral peaks 15 times the floor.
 
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 use rustfft::num_complex::Complex;
@@ -419,7 +424,8 @@ pub struct Spectrum {
     pub dof: f64,
     /// The floor's one-sided density `2σ²dt` (unit² / Hz).
     pub floor_psd: f64,
-    /// Whether the peaks were tested (not for an encoder speed).
+    /// Whether the peaks were tested (not for an encoder speed or a channel whose floor is its
+    /// ADC step: module docs).
     pub tested: bool,
     /// The largest local maxima, by decreasing ratio.
     pub peaks: Vec<SpectralPeak>,
@@ -449,7 +455,8 @@ pub struct AngleRipple {
     /// Its p-value times the number of N searched (Bonferroni), at most 1.
     pub p_value: f64,
     /// Whether the test applies (not to an encoder speed: a speed ripple modulates the
-    /// counts' periodic pattern, whose sidebands land at other N).
+    /// counts' periodic pattern, whose sidebands land at other N; nor to a channel whose floor
+    /// is its ADC step).
     pub tested: bool,
     /// Whether tested and `p_value` is below the family's share of `alpha`.
     pub significant: bool,
@@ -470,7 +477,8 @@ pub struct Whiteness {
     pub dof: usize,
     /// `P(χ²_dof > Q)`.
     pub p_value: f64,
-    /// Whether the test applies (not to an encoder speed).
+    /// Whether the test applies (not to an encoder speed or a channel whose floor is its ADC
+    /// step).
     pub tested: bool,
     /// Whether tested and `p_value` is below the family's share of `alpha`.
     pub significant: bool,
@@ -497,7 +505,8 @@ pub struct CrossCorrelation {
     pub max_ratio: f64,
     /// Two-sided p-value of that largest ratio times the number of lags, at most 1.
     pub p_value: f64,
-    /// Whether the test applies (not to an encoder speed).
+    /// Whether the test applies (not to an encoder speed or a channel whose floor is its ADC
+    /// step).
     pub tested: bool,
     /// Whether tested and `p_value` is below the family's share of `alpha`.
     pub significant: bool,
@@ -1336,7 +1345,10 @@ fn localise_channel(
     let c = factor_of(&rho);
     let prefix = Prefix::new(&r, &floor);
     let overall = excess_test(prefix.sums(0, n), n, c, family_alpha);
-    let encoder = ch.kind == Channel::EncoderSpeed;
+    // Tests of the residual's pattern (spectrum, whiteness, input correlation, ripple) need an
+    // error that is noise: not an encoder's counts, nor a quantiser without noise (module docs).
+    let pattern_tested =
+        ch.kind != Channel::EncoderSpeed && floor.report.source != FloorSource::AdcStep;
 
     let phase_alpha = family_alpha / phases.len().max(1) as f64;
     let phase_stats = phases
@@ -1364,21 +1376,21 @@ fn localise_channel(
         &r,
         rec.dt,
         sigma2,
-        !encoder,
+        pattern_tested,
         settings,
         family_alpha,
         planner,
     );
     let angle_ripple = rec
         .angle
-        .and_then(|th| angle_ripple(&r, th, settings.max_harmonic, !encoder, family_alpha));
-    let whiteness = whiteness(&rho, n, !encoder, family_alpha);
+        .and_then(|th| angle_ripple(&r, th, settings.max_harmonic, pattern_tested, family_alpha));
+    let whiteness = whiteness(&rho, n, pattern_tested, family_alpha);
     let cross_correlation = cross_correlation(
         &r,
         &rho,
         rec.voltage,
         settings.max_lag,
-        !encoder,
+        pattern_tested,
         family_alpha,
     );
     ChannelLocalisation {
