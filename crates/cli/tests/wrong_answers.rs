@@ -820,7 +820,10 @@ fn noise_free_adc_pairs_at_every_resolution_hold_their_error() {
     // takes the quantiser's deterministic error for what it is, not for a missing effect.
     let dir = scratch("noise-free-bits");
     for bits in ["8", "10", "12"] {
-        let (hv, lv) = (dir.join(format!("h{bits}.csv")), dir.join(format!("l{bits}.csv")));
+        let (hv, lv) = (
+            dir.join(format!("h{bits}.csv")),
+            dir.join(format!("l{bits}.csv")),
+        );
         for (path, volts) in [(&hv, "40"), (&lv, "2.5")] {
             simulate_to(
                 path,
