@@ -239,6 +239,43 @@ fn an_encoder_moving_half_a_count_per_sample_still_identifies_the_motor() {
     assert_truth_in_intervals(&v, &TRUTH);
 }
 
+/// The issue's own 100 kHz pair, with `MOTORID_HEAVY=1` only (two 5,000,001-sample records,
+/// about 800 MB of CSV and 10 GB of memory, a minute of fitting): `MOTORID_HEAVY=1 cargo test
+/// --release -p motorid --test wrong_answers -- --nocapture hundred_khz`.
+#[test]
+fn the_hundred_khz_logger_pair_identifies_the_motor_heavy() {
+    if std::env::var("MOTORID_HEAVY").map_or(true, |v| v != "1") {
+        eprintln!("skipped: set MOTORID_HEAVY=1 (the 10-M-sample pair)");
+        return;
+    }
+    let dir = scratch("hundred_khz");
+    let (hv, lv) = (dir.join("hv.csv"), dir.join("lv.csv"));
+    for (path, volts, seed) in [(&hv, "40", "1"), (&lv, "2.5", "2")] {
+        let mut args = LOGGER.to_vec();
+        args.extend(["--rate", "100000", "--voltage", volts, "--seed", seed, "-q"]);
+        simulate_to(path, &args);
+    }
+    let (h, l) = (hv.to_str().unwrap(), lv.to_str().unwrap());
+    let started = std::time::Instant::now();
+    let args = ["identify", "--high", h, "--low", l, "--json"];
+    let out = motorid_within(&args, std::time::Duration::from_secs(900))
+        .expect("the 100 kHz pair still fitting after 900 s");
+    eprintln!(
+        "identify of the 100 kHz pair: {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    // Its progress: a line a second while it fits.
+    assert!(
+        err.lines()
+            .any(|l| l.starts_with("  identify: fitting 10000002 samples (")),
+        "{err}"
+    );
+    let v: Value = serde_json::from_str(&stdout(&out)).unwrap();
+    assert_truth_in_intervals(&v, &TRUTH);
+}
+
 #[test]
 fn short_records_are_named_as_too_short() {
     // 10-sample records: the paper method said the step "does not break the Coulomb friction …
