@@ -602,6 +602,26 @@ fn montecarlo_runs_that_fail_are_counted_and_give_exit_code_3() {
         "{err}"
     );
     assert!(!stdout(&out).contains("NaN"), "{}", stdout(&out));
+    // Some runs failing (motors spread by 30 %, 8 s records: one of the eight is refused): the
+    // table covers the others, and the exit code is still 3.
+    let out = motorid(&[
+        "montecarlo",
+        "--runs",
+        "8",
+        "--motor-spread",
+        "0.3",
+        "--duration",
+        "8",
+        "--json",
+    ]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(3), "{err}");
+    assert!(
+        err.contains("error: 1 of 8 runs failed: the results above cover the other 7"),
+        "{err}"
+    );
+    let v: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
+    assert_eq!(v["runs"], 7, "{v}");
 }
 
 /// The identify command on simulated records of the paper's motor: noise-free records give
