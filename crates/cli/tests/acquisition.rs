@@ -84,25 +84,20 @@ fn simulate(path: &Path, volts: &str, seed: &str) {
     assert!(out.status.success(), "{}", stderr(&out));
 }
 
+/// `acquire` of a `volts` step for the paper's 50 s to `path`, with `extra` options.
 fn acquire(port: &str, volts: &str, path: &Path, extra: &[&str]) -> std::process::Output {
-    let mut args = vec![
-        "acquire",
-        "--port",
-        port,
-        "--voltage",
-        volts,
-        "--duration",
-        "50",
-        "-o",
-    ];
-    args.push(path.to_str().unwrap());
-    args.extend_from_slice(extra);
-    motorid(&args)
+    acquire_for(port, volts, "50", path, extra)
 }
 
-/// `acquire` of a `volts` step for `seconds` to `path`.
-fn acquire_for(port: &str, volts: &str, seconds: &str, path: &Path) -> std::process::Output {
-    motorid(&[
+/// `acquire` of a `volts` step for `seconds` to `path`, with `extra` options.
+fn acquire_for(
+    port: &str,
+    volts: &str,
+    seconds: &str,
+    path: &Path,
+    extra: &[&str],
+) -> std::process::Output {
+    let mut args = vec![
         "acquire",
         "--port",
         port,
@@ -111,8 +106,10 @@ fn acquire_for(port: &str, volts: &str, seconds: &str, path: &Path) -> std::proc
         "--duration",
         seconds,
         "-o",
-        path.to_str().unwrap(),
-    ])
+    ];
+    args.push(path.to_str().unwrap());
+    args.extend_from_slice(extra);
+    motorid(&args)
 }
 
 /// Acceptance 1 of the acquisition issue: a 40 V and a 2.5 V step of the paper's motor
@@ -188,7 +185,7 @@ fn acquire_writes_a_fifo_and_a_device_node_in_place() {
         let fifo = fifo.clone();
         std::thread::spawn(move || sent.send(std::fs::read_to_string(fifo).unwrap()));
     }
-    let out = acquire_for(&emulator.port, "2.5", "1", &fifo);
+    let out = acquire_for(&emulator.port, "2.5", "1", &fifo, &[]);
     assert!(out.status.success(), "{}", stderr(&out));
     let text = received
         .recv_timeout(std::time::Duration::from_secs(30))
@@ -209,7 +206,7 @@ fn acquire_writes_a_fifo_and_a_device_node_in_place() {
         );
         return;
     }
-    let out = acquire_for(&emulator.port, "2.5", "1", &node);
+    let out = acquire_for(&emulator.port, "2.5", "1", &node, &[]);
     assert!(out.status.success(), "{}", stderr(&out));
     let meta = std::fs::symlink_metadata(&node).unwrap();
     assert!(meta.file_type().is_char_device(), "the device was replaced");

@@ -18,6 +18,17 @@ fn json_of(args: &[&str]) -> (Value, std::process::Output) {
     (v, out)
 }
 
+/// [`json_of`] of `identify --high hv --low lv`.
+fn pair_json(hv: &std::path::Path, lv: &std::path::Path) -> (Value, std::process::Output) {
+    json_of(&[
+        "identify",
+        "--high",
+        hv.to_str().unwrap(),
+        "--low",
+        lv.to_str().unwrap(),
+    ])
+}
+
 /// A run of what once hung: a test failure, not a test that hangs with it, if it takes longer
 /// (each takes a second or two on the 2-core CI machine).
 const ONCE_HUNG_LIMIT: std::time::Duration = std::time::Duration::from_secs(120);
@@ -365,13 +376,7 @@ fn a_noise_free_adc_pair_with_an_exact_angle_column_is_not_overconfident() {
         assert!(joined.contains(",position[rad]\n"));
         std::fs::write(path, joined).unwrap();
     }
-    let (v, out) = json_of(&[
-        "identify",
-        "--high",
-        hv.to_str().unwrap(),
-        "--low",
-        lv.to_str().unwrap(),
-    ]);
+    let (v, out) = pair_json(&hv, &lv);
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
     assert_truth_in_intervals(&v, &TRUTH);
     // By output error: the voltage, one code throughout, was replayed as samples (its level's
@@ -401,13 +406,7 @@ fn logger_pairs_shorter_than_their_settling_identify_the_motor() {
             args.extend_from_slice(&["--voltage", volts, "--rate", rate, "--duration", duration]);
             simulate_to(path, &args);
         }
-        let (v, out) = json_of(&[
-            "identify",
-            "--high",
-            hv.to_str().unwrap(),
-            "--low",
-            lv.to_str().unwrap(),
-        ]);
+        let (v, out) = pair_json(&hv, &lv);
         assert_eq!(
             out.status.code(),
             Some(0),
@@ -867,13 +866,7 @@ fn noise_free_adc_pairs_at_every_resolution_hold_their_error() {
                 &["--voltage", volts, "--adc-bits", bits, "--noise-lsb", "0"],
             );
         }
-        let (v, out) = json_of(&[
-            "identify",
-            "--high",
-            hv.to_str().unwrap(),
-            "--low",
-            lv.to_str().unwrap(),
-        ]);
+        let (v, out) = pair_json(&hv, &lv);
         assert_eq!(out.status.code(), Some(0), "{bits} bits: {}", stderr(&out));
         for (name, truth) in TRUTH {
             let value = v["parameters"][name]["value"].as_f64().unwrap();
