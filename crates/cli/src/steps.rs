@@ -7,7 +7,7 @@ use std::path::Path;
 use anyhow::Result;
 use fit::{
     current_adc_steps, detect_initial_state, detect_rest, equation_error_start_with_initial_states,
-    identify_feedforward, identify_output_error_with_initial_states, identify_step_pair,
+    identify_feedforward, identify_output_error_with_friction_restarts, identify_step_pair,
     judge_clipping, locate_step_with, record_speed, voltage_input, voltage_levels, AxisRecord,
     ClippingVerdict, CurrentChannel, DetectedInitialState, ExcitedRecord, FeedforwardFit,
     FeedforwardSettings, FullFit, InitialState, LevelPrior, LmSettings, MeasuredChannels,
@@ -589,7 +589,7 @@ pub fn fit_excited_from(
             .map_err(|e| BadInput(format!("{label}: {e}{start_hint}")))?,
     };
     let priors: Vec<Vec<LevelPrior>> = loaded.iter().map(|l| l.priors.clone()).collect();
-    let full = identify_output_error_with_initial_states(
+    let (start, full) = identify_output_error_with_friction_restarts(
         &records,
         &priors,
         &states,

@@ -212,10 +212,17 @@ const NOISE_TRIM: f64 = 0.005;
 /// quantisation (ADC, encoder) shows as sparse jumps of one step whose median is 0. Floored at
 /// 1e-7 of the signal's range, so that exact data still gives finite weights. Unit of `y`.
 pub fn noise_std(y: &[f64]) -> f64 {
-    let mut d2: Vec<f64> = y
-        .windows(3)
-        .map(|w| (w[2] - 2.0 * w[1] + w[0]).powi(2))
-        .collect();
+    noise_of_second_differences(y.windows(3).map(squared_second_difference).collect(), y)
+}
+
+/// `(y[i+2] − 2 y[i+1] + y[i])²` of a window of three samples.
+pub(crate) fn squared_second_difference(w: &[f64]) -> f64 {
+    (w[2] - 2.0 * w[1] + w[0]).powi(2)
+}
+
+/// [`noise_std`] from the squared second differences `d2` of (parts of) the signal `y`: their
+/// RMS, largest 0.5 % dropped, over `√6`, floored at [`noise_floor`] of `y`.
+pub(crate) fn noise_of_second_differences(mut d2: Vec<f64>, y: &[f64]) -> f64 {
     let floor = noise_floor(y);
     if d2.is_empty() {
         return floor;

@@ -37,7 +37,7 @@ const QUANTISED_DISTINCT_FRACTION: f64 = 0.25;
 /// Relative tolerance of "a multiple of the quantum" (values printed with finite digits).
 const QUANTUM_TOLERANCE: f64 = 1e-3;
 /// Joint Gauss–Newton passes on `(θ, u)` before the final covariance.
-const REFINE_PASSES: usize = 2;
+const REFINE_PASSES: usize = 8;
 
 /// What a voltage column says about its ADC: the quantum (one LSB) and the extreme values.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -97,9 +97,9 @@ pub use model33::{fit_33, Fit33, Params33, Record33};
 pub use output_error::{
     electrical_equation, equation_error_start, equation_error_start_with_initial_states,
     identify_output_error, identify_output_error_with_effects,
-    identify_output_error_with_initial_states, identify_output_error_with_inputs,
-    identify_output_error_with_inputs_and_effects, predict_output_error, voltage_input,
-    voltage_levels, ExcitedRecord,
+    identify_output_error_with_friction_restarts, identify_output_error_with_initial_states,
+    identify_output_error_with_inputs, identify_output_error_with_inputs_and_effects,
+    predict_output_error, voltage_input, voltage_levels, ExcitedRecord,
 };
 pub use paper_method::{
     from_high_voltage, identify_paper, speed_check_c8, suggested_low_voltage_45,
