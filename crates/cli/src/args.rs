@@ -329,7 +329,12 @@ pub struct IdentifyArgs {
     pub batch: Option<PathBuf>,
     /// With --batch: a motor folder still fitting after this long is set aside as an error
     /// row of the summary, and the batch goes on [s; default 600].
-    #[arg(long, value_name = "SECONDS", requires = "batch")]
+    #[arg(
+        long,
+        value_name = "SECONDS",
+        requires = "batch",
+        allow_negative_numbers = true
+    )]
     pub folder_limit: Option<f64>,
     /// Column names of a file from another tool: t=HEADER,current=HEADER,position=HEADER,...
     #[arg(long, value_name = "NAME=HEADER,...")]

@@ -20,6 +20,18 @@ pub struct ColumnMap {
 const COLUMNS: [&str; 5] = ["t", "voltage", "current", "speed", "position"];
 
 impl ColumnMap {
+    /// The `--columns` text that gives this map again (`name=header,...`), `None` for the
+    /// record's own names.
+    pub fn as_option(&self) -> Option<String> {
+        (!self.pairs.is_empty()).then(|| {
+            self.pairs
+                .iter()
+                .map(|(name, header)| format!("{name}={header}"))
+                .collect::<Vec<_>>()
+                .join(",")
+        })
+    }
+
     /// Parses `name=header,...`.
     pub fn parse(text: &str) -> Result<Self> {
         let mut pairs = Vec::new();

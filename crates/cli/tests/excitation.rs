@@ -196,7 +196,8 @@ fn batch_identifies_a_fleet_and_reports_broken_folders() {
         std::time::Duration::from_secs(60),
     )
     .expect("the batch ends although no folder finishes within its limit");
-    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    // Not bad input: a failed identification (exit 3).
+    assert_eq!(out.status.code(), Some(3), "{}", stderr(&out));
     let text = stdout(&out);
     assert!(text.contains("14 motors: 0 identified"), "{text}");
     let csv = std::fs::read_to_string(fleet.join("summary.csv")).unwrap();
@@ -218,6 +219,50 @@ fn batch_identifies_a_fleet_and_reports_broken_folders() {
             "--folder-limit",
             "0",
         ],
-        "--folder-limit 0: expected a positive number of seconds",
+        "--folder-limit 0.000e0: expected seconds from 1e-6 to 1e6",
     );
+    assert_bad_input(
+        &[
+            "identify",
+            "--batch",
+            fleet.to_str().unwrap(),
+            "--folder-limit",
+            "-1",
+        ],
+        "--folder-limit -1.000e0: expected seconds from 1e-6 to 1e6",
+    );
+    // A fleet with a motor whose records show cogging the model lacks: its row says so.
+    let cogging = fleet.join("motor_cogging");
+    std::fs::create_dir_all(&cogging).unwrap();
+    for (name, volts, seed) in [("high.csv", "40", "1"), ("low.csv", "2.5", "2")] {
+        let mut args = LOGGER.to_vec();
+        args.extend([
+            "--voltage",
+            volts,
+            "--seed",
+            seed,
+            "--effect",
+            "cogging_torque:amp=0.1,n=6",
+        ]);
+        simulate_to(&cogging.join(name), &args);
+    }
+    std::fs::remove_dir_all(&broken).unwrap();
+    let out = motorid(&["identify", "--batch", fleet.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let text = stdout(&out);
+    assert!(
+        text.contains(
+            "warning: the model misses something the records of 1 of 14 identified motors show"
+        ) && text.contains("summary.json): motor_cogging —"),
+        "{text}"
+    );
+    let csv = std::fs::read_to_string(fleet.join("summary.csv")).unwrap();
+    assert!(csv.lines().next().unwrap().ends_with(",model_check,error"));
+    let row = csv
+        .lines()
+        .find(|l| l.starts_with("motor_cogging"))
+        .unwrap();
+    assert!(row.contains(",misses ("), "{row}");
+    let row = csv.lines().find(|l| l.starts_with("motor_001")).unwrap();
+    assert!(row.contains(",noise,"), "{row}");
 }

@@ -815,7 +815,7 @@ fn unmodelled_effects_are_said_to_bias_the_result_not_left_silent() {
         let text = motorid(&["identify", "--high", &hv, "--low", &lv]);
         let shown = stdout(&text);
         assert!(
-            shown.contains("warning: the model misses something these records show")
+            shown.contains("warning: the residual is not the records' noise: the model misses something they show")
                 && shown.contains(&format!("motorid diagnose --high {hv} --low {lv}")),
             "{effect}: {shown}"
         );

@@ -67,12 +67,17 @@
 //! evidence (`tested: false`): at constant speed the counts make a deterministic, periodic
 //! error, neither white nor flat in spectrum, whose sidebands put a speed ripple at other N per
 //! revolution. An encoder speed is judged on magnitudes only (whiteness, cross-correlation,
-//! spectrum and angle ripple are reported untested). So is an ADC channel whose floor is its
-//! quantiser (`q/√12` above the scatter and the second-difference noise: a noise-free or nearly
-//! noise-free ADC): its error is then a deterministic sawtooth of the signal, held for as many
-//! samples as the signal stays within one code, neither white nor flat in spectrum. On the
-//! paper's noise-free 10-bit step pair, the correct model's residual had Ljung–Box Q = 4·10⁵
-//! and spectral peaks 15 times the floor.
+//! spectrum and angle ripple are reported untested). With
+//! [`LocaliseSettings::dithered_steps`] so is an ADC channel whose noise is below that many of
+//! its steps, and its floor is at least half a step: without noise a quantiser's error is a
+//! deterministic sawtooth of the signal, held for as many samples as the signal stays within
+//! one code (up to ±q/2 for seconds on a settled signal), neither white nor flat in spectrum,
+//! and noise below a step or so dithers it only in part. On the paper's noise-free 10-bit step
+//! pair the correct model's residual had Ljung–Box Q = 4·10⁵ and spectral peaks 15 times the
+//! floor; at 0.3–0.5 LSB of noise the correct model of the small servo or of the paper's motor
+//! was "not white" in every seed tried, at 1 LSB in 3 of 20 seeds of an 8-bit record. The
+//! step is found from the values, or from their differences where the values are too many
+//! to show it (a 14-bit record).
 
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 use rustfft::num_complex::Complex;
@@ -178,6 +183,13 @@ pub struct LocaliseSettings {
     pub spectrum_peaks: usize,
     /// Largest harmonic N per revolution searched for angle ripple (default 64).
     pub max_harmonic: u32,
+    /// Noise, in steps of a channel's ADC, below which its quantisation error is taken as not
+    /// yet noise (module docs): the channel's pattern tests (spectrum, ripple, whiteness, input
+    /// correlation) are then reported untested and its floor is at least half a step, the
+    /// largest error of a quantiser without noise. 0 (default) takes every quantiser's error
+    /// as noise, as the diagnosis's screening of candidates reads it;
+    /// [`LocaliseSettings::model_check`] uses 1.5.
+    pub dithered_steps: f64,
 }
 
 impl Default for LocaliseSettings {
@@ -191,6 +203,7 @@ impl Default for LocaliseSettings {
             welch_segment: 256,
             spectrum_peaks: 5,
             max_harmonic: 64,
+            dithered_steps: 0.0,
         }
     }
 }
@@ -198,7 +211,10 @@ impl Default for LocaliseSettings {
 impl LocaliseSettings {
     /// The settings of the model check `motorid identify` makes on every accepted fit
     /// ([`crate::StepPairIdentification::localise`]): the defaults at a family-wise
-    /// false-alarm probability `alpha` of 1e-6. At the default 0.01 the check flagged 10 of 94
+    /// false-alarm probability `alpha` of 1e-6, and quantisers with less than 1.5 steps of
+    /// noise judged on the size of their residual only (`dithered_steps`: a channel read
+    /// without noise, or with a third of a step, made the correct model "not white" and its
+    /// settled stretches "above the floor"). At the default 0.01 the check flagged 10 of 94
     /// accepted fits of records without any effect (the heavy property run of
     /// `crates/cli/tests/property_identify.rs`): small misfits of a correct model (a slow
     /// rise over a few hundred samples, an encoder speed a few counts per sample) are
@@ -209,6 +225,7 @@ impl LocaliseSettings {
     pub fn model_check() -> Self {
         LocaliseSettings {
             alpha: 1e-6,
+            dithered_steps: 1.5,
             ..LocaliseSettings::default()
         }
     }
@@ -252,6 +269,10 @@ pub struct NoiseFloor {
     /// deviations of an ADC rail of the channel (an extreme value held by at least 1 % of
     /// its samples: a current at rest on a unipolar channel), where the rail clips the noise.
     pub rail_samples: usize,
+    /// Whether the channel is an ADC's whose noise does not dither it
+    /// ([`LocaliseSettings::dithered_steps`]): its floor is then at least half a step and its
+    /// pattern tests are untested.
+    pub undithered: bool,
 }
 
 /// An excess test over a set of samples (see the module documentation).
@@ -382,7 +403,12 @@ pub struct Trend {
     pub t: f64,
     /// Two-sided p-value (normal).
     pub p_value: f64,
-    /// Whether `p_value` is below the family's share of `alpha`.
+    /// Whether the test applies: not to an ADC channel whose noise does not dither its
+    /// quantiser, whose floor is then a bound, not each sample's expected square (a settled
+    /// current holds one code's error, a moving one sweeps the codes: a trend with |I| the
+    /// model does not cause).
+    pub tested: bool,
+    /// Whether tested and `p_value` is below the family's share of `alpha`.
     pub significant: bool,
 }
 
@@ -424,8 +450,8 @@ pub struct Spectrum {
     pub dof: f64,
     /// The floor's one-sided density `2σ²dt` (unit² / Hz).
     pub floor_psd: f64,
-    /// Whether the peaks were tested (not for an encoder speed or a channel whose floor is its
-    /// ADC step: module docs).
+    /// Whether the peaks were tested (not for an encoder speed or an ADC channel whose noise
+    /// does not dither its quantiser: module docs).
     pub tested: bool,
     /// The largest local maxima, by decreasing ratio.
     pub peaks: Vec<SpectralPeak>,
@@ -455,8 +481,8 @@ pub struct AngleRipple {
     /// Its p-value times the number of N searched (Bonferroni), at most 1.
     pub p_value: f64,
     /// Whether the test applies (not to an encoder speed: a speed ripple modulates the
-    /// counts' periodic pattern, whose sidebands land at other N; nor to a channel whose floor
-    /// is its ADC step).
+    /// counts' periodic pattern, whose sidebands land at other N; nor to an ADC channel whose
+    /// noise does not dither its quantiser).
     pub tested: bool,
     /// Whether tested and `p_value` is below the family's share of `alpha`.
     pub significant: bool,
@@ -477,8 +503,8 @@ pub struct Whiteness {
     pub dof: usize,
     /// `P(χ²_dof > Q)`.
     pub p_value: f64,
-    /// Whether the test applies (not to an encoder speed or a channel whose floor is its ADC
-    /// step).
+    /// Whether the test applies (not to an encoder speed or an ADC channel whose noise does
+    /// not dither its quantiser).
     pub tested: bool,
     /// Whether tested and `p_value` is below the family's share of `alpha`.
     pub significant: bool,
@@ -505,8 +531,8 @@ pub struct CrossCorrelation {
     pub max_ratio: f64,
     /// Two-sided p-value of that largest ratio times the number of lags, at most 1.
     pub p_value: f64,
-    /// Whether the test applies (not to an encoder speed or a channel whose floor is its ADC
-    /// step).
+    /// Whether the test applies (not to an encoder speed or an ADC channel whose noise does
+    /// not dither its quantiser).
     pub tested: bool,
     /// Whether tested and `p_value` is below the family's share of `alpha`.
     pub significant: bool,
@@ -1045,6 +1071,23 @@ fn quantum_of(x: &[f64]) -> Option<f64> {
     detect_quantum(&rounded)
 }
 
+/// The noise of `y` from the median of its second differences' magnitudes: `median|Δ²y|`
+/// over `0.6745 √6` (Gaussian noise σ gives second differences of deviation `√6 σ`, whose
+/// median magnitude is 0.6745 of it). 0 for a signal that holds its value in most windows
+/// of three samples (a quantiser without noise).
+fn median_noise(y: &[f64]) -> f64 {
+    let mut d2: Vec<f64> = y
+        .windows(3)
+        .map(|w| (w[2] - 2.0 * w[1] + w[0]).abs())
+        .collect();
+    if d2.is_empty() {
+        return 0.0;
+    }
+    let mid = d2.len() / 2;
+    let (_, median, _) = d2.select_nth_unstable_by(mid, f64::total_cmp);
+    *median / (0.6745 * 6f64.sqrt())
+}
+
 /// Per-sample floor: expected `r²` and the variance of `r²`, zero at the samples left out.
 struct FloorModel {
     v: Vec<f64>,
@@ -1118,6 +1161,7 @@ fn given_floor_model(ch: &ResidualChannel, sigma: f64, y_ss: f64) -> FloorModel 
             f64::INFINITY
         },
         rail_samples: 0,
+        undithered: false,
     };
     FloorModel {
         w: vec![2.0 * sigma.powi(4); n],
@@ -1127,12 +1171,22 @@ fn given_floor_model(ch: &ResidualChannel, sigma: f64, y_ss: f64) -> FloorModel 
     }
 }
 
-fn floor_model(rec: &ResidualRecord, ch: &ResidualChannel, y_ss: f64) -> FloorModel {
+fn floor_model(
+    rec: &ResidualRecord,
+    ch: &ResidualChannel,
+    y_ss: f64,
+    dithered_steps: f64,
+) -> FloorModel {
     let y = ch.measured;
     let n = y.len();
     let second_difference = noise_std(y);
     let steady = steady_scatter(y);
-    let adc_step = detect_quantum(y);
+    let differences: Vec<f64> = y.windows(2).map(|w| w[1] - w[0]).collect();
+    let adc_step = detect_quantum(y).or_else(|| {
+        (dithered_steps > 0.0)
+            .then(|| quantum_of(&differences))
+            .flatten()
+    });
     let nrmse_floor = |v: &[f64]| {
         let s = v.iter().sum::<f64>().sqrt();
         if y_ss > 0.0 {
@@ -1171,6 +1225,7 @@ fn floor_model(rec: &ResidualRecord, ch: &ResidualChannel, y_ss: f64) -> FloorMo
                 encoder_step_rad: Some(2.0 * rec.dt * q),
                 nrmse_floor: nrmse_floor(&v),
                 rail_samples: 0,
+                undithered: false,
             };
             return FloorModel {
                 v,
@@ -1180,7 +1235,25 @@ fn floor_model(rec: &ResidualRecord, ch: &ResidualChannel, y_ss: f64) -> FloorMo
             };
         }
     }
-    let adc = adc_step.map(|q| q / 12f64.sqrt());
+    // Each noise estimate can only take some signal for noise, never the reverse: the RMS
+    // second difference a fast signal's curvature (a noise-free 14-bit current of a 1 ms τe
+    // at 6 kHz read several steps of "noise"), the flat stretches a staircase's transients
+    // (9 steps on a noise-free 10-bit one), the median second difference (robust to the
+    // few samples of a PRBS's switches) the least. The smallest is the noise.
+    let measured_noise = steady
+        .unwrap_or(f64::INFINITY)
+        .min(second_difference)
+        .min(median_noise(y));
+    let undithered = adc_step.is_some_and(|q| measured_noise < dithered_steps * q);
+    // A quantiser the noise does not dither errs by up to half a step, held as long as the
+    // signal stays within one code: its floor is that bound.
+    let adc = adc_step.map(|q| {
+        if undithered {
+            0.5 * q
+        } else {
+            q / 12f64.sqrt()
+        }
+    });
     let mut sigma = second_difference;
     let mut source = FloorSource::SecondDifference;
     for (s, src) in [
@@ -1214,6 +1287,7 @@ fn floor_model(rec: &ResidualRecord, ch: &ResidualChannel, y_ss: f64) -> FloorMo
         encoder_step_rad: None,
         nrmse_floor: floor_of_all,
         rail_samples: keep.iter().filter(|k| !**k).count(),
+        undithered,
     };
     FloorModel { v, w, keep, report }
 }
@@ -1332,7 +1406,7 @@ fn localise_channel(
     };
     let floor = match given_floor {
         Some(sigma) => given_floor_model(ch, sigma, y_ss),
-        None => floor_model(rec, ch, y_ss),
+        None => floor_model(rec, ch, y_ss, settings.dithered_steps),
     };
     let full_residual = r;
     // The residual of the tests: zero at the samples left out.
@@ -1346,9 +1420,9 @@ fn localise_channel(
     let prefix = Prefix::new(&r, &floor);
     let overall = excess_test(prefix.sums(0, n), n, c, family_alpha);
     // Tests of the residual's pattern (spectrum, whiteness, input correlation, ripple) need an
-    // error that is noise: not an encoder's counts, nor a quantiser without noise (module docs).
-    let pattern_tested =
-        ch.kind != Channel::EncoderSpeed && floor.report.source != FloorSource::AdcStep;
+    // error that is noise: not an encoder's counts, nor a quantiser whose noise does not yet
+    // dither it (module docs).
+    let pattern_tested = ch.kind != Channel::EncoderSpeed && !floor.report.undithered;
 
     let phase_alpha = family_alpha / phases.len().max(1) as f64;
     let phase_stats = phases
@@ -1542,13 +1616,15 @@ fn bands(
     let excess: Vec<f64> = used.iter().map(|&i| r[i] * r[i] - floor.v[i]).collect();
     let at: Vec<f64> = used.iter().map(|&i| ax[i]).collect();
     let wt: Vec<f64> = used.iter().map(|&i| floor.w[i]).collect();
+    let tested = !floor.report.undithered;
     let trend = floor_slope(&excess, &at, &wt, c).map(|(slope, t)| {
         let p_value = (2.0 * normal_sf(t.abs())).min(1.0);
         Trend {
             slope,
             t,
             p_value,
-            significant: p_value < family_alpha,
+            tested,
+            significant: tested && p_value < family_alpha,
         }
     });
     Bands {

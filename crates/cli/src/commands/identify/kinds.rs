@@ -190,6 +190,7 @@ pub fn report(a: &Settings, kind: &RecordKind, fit: &FeedforwardFit, files: &[&s
         let report = json!({
             "method": "voltage_speed",
             "record_kind": kind_json(kind),
+            "model_check": {"made": false, "reason": "not made for the voltage-to-speed model: motorid diagnose needs a current"},
             "parameters": parameters,
             "tau_e": tau_e_json(&fit.tau_e),
             "tau_m": match fit.tau_e {

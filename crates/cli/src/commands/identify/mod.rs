@@ -65,6 +65,9 @@ pub enum Axis {
 /// How long one motor folder of `--batch` may take by default \[s\]: ten minutes, far beyond
 /// the few seconds a folder of logger records takes.
 const DEFAULT_FOLDER_LIMIT_S: f64 = 600.0;
+/// The `--folder-limit` values accepted \[s\]: from a microsecond (every folder set aside, as
+/// a test of the summary) to about eleven days.
+const FOLDER_LIMIT_RANGE_S: (f64, f64) = (1e-6, 1e6);
 
 /// What `motorid identify` identifies and how, validated from its arguments.
 #[derive(Debug, Clone)]
@@ -170,14 +173,14 @@ impl Settings {
             .into());
         }
         let limit_s = a.folder_limit.unwrap_or(DEFAULT_FOLDER_LIMIT_S);
-        let folder_limit = std::time::Duration::try_from_secs_f64(limit_s)
-            .ok()
-            .filter(|d| !d.is_zero())
-            .ok_or_else(|| {
-                BadInput(format!(
-                    "--folder-limit {limit_s}: expected a positive number of seconds"
-                ))
-            })?;
+        if !(FOLDER_LIMIT_RANGE_S.0..=FOLDER_LIMIT_RANGE_S.1).contains(&limit_s) {
+            return Err(BadInput(format!(
+                "--folder-limit {limit_s:.3e}: expected seconds from {:e} to {:e}",
+                FOLDER_LIMIT_RANGE_S.0, FOLDER_LIMIT_RANGE_S.1
+            ))
+            .into());
+        }
+        let folder_limit = std::time::Duration::from_secs_f64(limit_s);
         let columns = match &a.columns {
             Some(text) => ColumnMap::parse(text)?,
             None => ColumnMap::default(),
@@ -654,6 +657,7 @@ fn run_current(a: &Settings, paths: &[PathBuf]) -> Result<()> {
             "method": "inverse_model",
             "input": "current",
             "record_kind": kinds::kind_json(&kind),
+            "model_check": {"made": false, "reason": "not made by identify for a current-driven axis: motorid diagnose --input current localises the torque residual"},
             "parameters": parameters,
             "quality": {
                 "samples_after_decimation": fit.samples,
@@ -768,6 +772,7 @@ pub fn run(a: &Settings) -> Result<()> {
         result.localise(&hv.step_record(), &lv.step_record(), &files)
     });
     drop(phases);
+    let diagnose = diagnose_command(a, &[("--high", high), ("--low", low)]);
     let why = result.paper.as_ref().map_err(ToString::to_string);
     let paper = why.as_ref().copied().map_err(String::as_str);
     let method = result.route.method_name();
@@ -776,9 +781,7 @@ pub fn run(a: &Settings) -> Result<()> {
         let mut report = report_json(method, paper, full, &files);
         if let Some(obj) = report.as_object_mut() {
             obj.insert("record_kind".into(), kinds::kind_json(&kind));
-            if let Some(c) = &check {
-                obj.insert("model_check".into(), c.json());
-            }
+            obj.insert("model_check".into(), check.json(&diagnose));
         }
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -786,13 +789,7 @@ pub fn run(a: &Settings) -> Result<()> {
         let note = result.note();
         let whole = hv.whole.is_some() && lv.whole.is_some();
         print_table(method, whole, paper, full, &files, note.as_deref());
-        if let Some(c) = &check {
-            c.print(&format!(
-                "motorid diagnose --high {} --low {}",
-                high.display(),
-                low.display()
-            ));
-        }
+        check.print(&diagnose);
     }
     if let (Some(dir), Some(f)) = (&a.plot, full) {
         let records = [&hv, &lv].map(|s| FigureRecord {
@@ -896,6 +893,13 @@ fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Resu
     )?;
     let (start, full) = (fitted.start, fitted.full);
     phases.enter(MODEL_CHECK_PHASE.into());
+    let diagnose = diagnose_command(
+        a,
+        &paths
+            .iter()
+            .map(|p| ("--record", p.as_path()))
+            .collect::<Vec<_>>(),
+    );
     let check = ModelCheck::of(Some(&full), || {
         let records: Vec<ExcitedRecord> = loaded.iter().map(|l| l.excited()).collect();
         Some(fit::diagnose::localise_fit(
@@ -945,9 +949,7 @@ fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Resu
                 obj.insert("note".into(), note.into());
             }
             obj.insert("record_kind".into(), kinds::kind_json(&kind));
-            if let Some(c) = &check {
-                obj.insert("model_check".into(), c.json());
-            }
+            obj.insert("model_check".into(), check.json(&diagnose));
         }
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -970,13 +972,7 @@ fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Resu
         if let Some(note) = note {
             println!("note: {note}");
         }
-        if let Some(c) = &check {
-            let records: Vec<String> = paths
-                .iter()
-                .map(|p| format!("--record {}", p.display()))
-                .collect();
-            c.print(&format!("motorid diagnose {}", records.join(" ")));
-        }
+        check.print(&diagnose);
     }
     if let Some(dir) = &a.plot {
         let records: Vec<FigureRecord> = loaded
@@ -993,39 +989,62 @@ fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Resu
 }
 
 /// What the check of an accepted fit's residual against the records' own noise found
-/// ([`fit::diagnose::localise_fit`]): its significant findings in words, or why it was not
-/// made.
-struct ModelCheck(std::result::Result<Vec<String>, String>);
+/// ([`fit::diagnose::localise_fit`]): its significant findings, or why it was not made.
+struct ModelCheck(std::result::Result<Checked, String>);
+
+/// A check made: the significant findings, and each channel's noise floor.
+struct Checked {
+    findings: Vec<fit::diagnose::localise::Finding>,
+    floors: Value,
+}
 
 impl ModelCheck {
-    /// The check of `full` when it is accepted (`None` otherwise: a refused fit has its own
-    /// reason), from the localisation `run` makes.
+    /// The check of `full` when it is accepted, from the localisation `run` makes; a refused
+    /// or missing fit is not checked, and says why.
     fn of(
         full: Option<&FullFit>,
         run: impl FnOnce() -> Option<std::result::Result<Localisation, fit::FitError>>,
-    ) -> Option<ModelCheck> {
+    ) -> ModelCheck {
         if !full.is_some_and(FullFit::accepted) {
-            return None;
+            return ModelCheck::not_made(if full.is_some() {
+                "the fit is refused"
+            } else {
+                "the paper's method leaves no residual of the whole records to check (--method full checks it)"
+            });
         }
-        let found = run()?
-            .map(|l| {
-                l.significant_findings()
-                    .into_iter()
-                    .map(|f| f.text)
-                    .collect()
-            })
-            .map_err(|e| e.to_string());
-        Some(ModelCheck(found))
+        ModelCheck(match run() {
+            Some(Ok(l)) => Ok(Checked {
+                findings: l.significant_findings(),
+                floors: l
+                    .records
+                    .iter()
+                    .flat_map(|r| {
+                        r.channels.iter().map(|c| {
+                            json!({"record": r.name, "channel": c.channel.name(), "floor": c.floor})
+                        })
+                    })
+                    .collect(),
+            }),
+            Some(Err(e)) => Err(e.to_string()),
+            None => Err("no fit to check".into()),
+        })
     }
 
-    /// The `model_check` object of `--json`.
-    fn json(&self) -> Value {
+    /// A check not made, for `why`.
+    fn not_made(why: &str) -> ModelCheck {
+        ModelCheck(Err(why.into()))
+    }
+
+    /// The `model_check` object of `--json`, with the `diagnose` command for the same records.
+    fn json(&self, diagnose: &str) -> Value {
         match &self.0 {
-            Ok(found) => json!({
+            Ok(c) => json!({
                 "made": true,
                 "alpha": LocaliseSettings::model_check().alpha,
-                "model_misses": !found.is_empty(),
-                "findings": found,
+                "model_misses": !c.findings.is_empty(),
+                "findings": c.findings,
+                "floors": c.floors,
+                "diagnose": (!c.findings.is_empty()).then_some(diagnose),
             }),
             Err(why) => json!({"made": false, "reason": why}),
         }
@@ -1034,24 +1053,62 @@ impl ModelCheck {
     /// The warning of the table when the residual is not the records' noise; `diagnose` is
     /// the command that looks for the cause on the same records.
     fn print(&self, diagnose: &str) {
-        match &self.0 {
-            Ok(found) if found.is_empty() => {}
-            Ok(found) => {
-                println!(
-                    "warning: the model misses something these records show — the residual is not their noise ({} finding(s) at a family-wise false-alarm level of {:e}):",
-                    found.len(),
-                    LocaliseSettings::model_check().alpha
-                );
-                for f in found.iter().take(MODEL_CHECK_SHOWN) {
-                    println!("  {f}");
-                }
-                println!(
-                    "  The values and intervals above assume a complete model: an unmodelled effect biases them beyond their intervals. `{diagnose}` names the effect and refits the motor with it."
-                );
-            }
-            Err(why) => println!("model check not made: {why}"),
+        let Ok(Checked {
+            findings: found, ..
+        }) = &self.0
+        else {
+            return;
+        };
+        if found.is_empty() {
+            return;
         }
+        let shown = found.len().min(MODEL_CHECK_SHOWN);
+        println!(
+            "warning: the residual is not the records' noise: the model misses something they show ({} finding(s) at a family-wise false-alarm level of {:e}{}):",
+            found.len(),
+            LocaliseSettings::model_check().alpha,
+            if shown < found.len() {
+                format!("; the first {shown}, --json lists all")
+            } else {
+                String::new()
+            }
+        );
+        for f in &found[..shown] {
+            println!("  {}", f.text);
+        }
+        println!(
+            "  The values and intervals above assume the model is complete: where the cause is an effect it lacks, they carry its bias beyond their intervals. `{diagnose}` looks for the effect and refits the motor with it."
+        );
     }
+}
+
+/// `path` as one word of a POSIX shell command: as it is when it holds only characters no
+/// shell treats specially, else in single quotes.
+fn shell_word(path: &str) -> String {
+    let plain = !path.is_empty()
+        && path
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || "_./,:=+-@%".contains(c));
+    if plain {
+        path.to_string()
+    } else {
+        format!("'{}'", path.replace('\'', "'\\''"))
+    }
+}
+
+/// The `motorid diagnose` command for records given as `records` (`--high`, `--low`,
+/// `--record` with their paths), with the `--columns` of `a`.
+fn diagnose_command(a: &Settings, records: &[(&str, &std::path::Path)]) -> String {
+    let mut words = vec!["motorid".to_string(), "diagnose".to_string()];
+    for (option, path) in records {
+        words.push(option.to_string());
+        words.push(shell_word(&path.display().to_string()));
+    }
+    if let Some(columns) = a.columns.as_option() {
+        words.push("--columns".into());
+        words.push(shell_word(&columns));
+    }
+    words.join(" ")
 }
 
 /// The phase of the model check, for the progress on standard error.
