@@ -1121,8 +1121,9 @@ pub fn identify_output_error_with_initial_states(
 /// [`identify_output_error_with_initial_states`] from `start`, tried again from other starts
 /// where that fit is refused because a friction parameter went to nothing
 /// ([`crate::Refusal::Vanished`]), or so near it that the records no longer determine it
-/// ([`crate::Refusal::Undetermined`] of f or Ts): a start that splits the friction wrongly between f and Ts
-/// can lead the fit into the minimum without one of them. The equation-error start of a ±12 V
+/// ([`crate::Refusal::Undetermined`] of f or Ts): a start that splits the friction wrongly
+/// between f and Ts can lead the fit into the minimum without one of them. The equation-error
+/// start of a ±12 V
 /// PRBS of the small servo (`fixtures/motors/small_servo.json`, 1 s at 2 kHz through the
 /// logger) put f at 2.3 times its value and Ts at a ninth of it, and the fit drove Ts to
 /// 1e-15 N·m on 5 of 6 seeds; from f halved, or from Ts tenfold, it found the motor. The
