@@ -87,10 +87,16 @@ pub struct Phases {
 impl Phases {
     /// Starts reporting the phases of `command` (nothing at all when `quiet`).
     pub fn start(command: &'static str, quiet: bool) -> Self {
+        Phases::start_with(command, quiet, || None)
+    }
+
+    /// [`Phases::start`], each line with what `detail` says at that moment (e.g. the fit's
+    /// steps so far) after its phase.
+    pub fn start_with(command: &'static str, quiet: bool, detail: fn() -> Option<String>) -> Self {
         let shared = Arc::new((Mutex::new((String::new(), false)), Condvar::new()));
         let reporter = (!quiet).then(|| {
             let shared = Arc::clone(&shared);
-            std::thread::spawn(move || report(command, &shared))
+            std::thread::spawn(move || report(command, detail, &shared))
         });
         Phases { shared, reporter }
     }
@@ -119,7 +125,11 @@ impl Drop for Phases {
 }
 
 /// The reporting thread of [`Phases`].
-fn report(command: &str, shared: &(Mutex<(String, bool)>, Condvar)) {
+fn report(
+    command: &str,
+    detail: fn() -> Option<String>,
+    shared: &(Mutex<(String, bool)>, Condvar),
+) {
     let (state, changed) = shared;
     let started = Instant::now();
     let terminal = std::io::stderr().is_terminal();
@@ -143,8 +153,9 @@ fn report(command: &str, shared: &(Mutex<(String, bool)>, Condvar)) {
         };
         if due && !s.0.is_empty() {
             let line = format!(
-                "  {command}: {} ({:.1} s)",
+                "  {command}: {}{} ({:.1} s)",
                 s.0,
+                detail().map_or(String::new(), |d| format!(", {d}")),
                 started.elapsed().as_secs_f64()
             );
             if terminal {

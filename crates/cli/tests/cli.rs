@@ -518,7 +518,7 @@ fn long_identifications_report_progress_unless_quiet() {
     // A line a second once the work has taken a second, naming its phase.
     let fitting: Vec<&str> = err
         .lines()
-        .filter(|l| l.starts_with("  identify: fitting 1000002 samples ("))
+        .filter(|l| l.starts_with("  identify: fitting 1000002 samples"))
         .collect();
     assert!(!fitting.is_empty(), "no progress of the fit: {err}");
     let at = |line: &str| -> f64 {

@@ -280,7 +280,7 @@ fn the_hundred_khz_logger_pair_identifies_the_motor_heavy() {
     // Its progress: a line a second while it fits.
     assert!(
         err.lines()
-            .any(|l| l.starts_with("  identify: fitting 10000002 samples (")),
+            .any(|l| l.starts_with("  identify: fitting 10000002 samples")),
         "{err}"
     );
     let v: Value = serde_json::from_str(&stdout(&out)).unwrap();

@@ -86,7 +86,8 @@ pub use input_uncertainty::{
 };
 pub use intervals::MotorIntervals;
 pub use lm::{
-    solve, LeastSquares, LevenbergMarquardt, LmReport, LmSettings, NormalEquations, Termination,
+    accepted_steps, solve, LeastSquares, LevenbergMarquardt, LmReport, LmSettings, NormalEquations,
+    Termination,
 };
 pub use mechanical::{
     identify_inverse_model, identify_inverse_model_pooled, motor_torque, AxisRecord, FittedTorque,

@@ -23,6 +23,16 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::error::FitError;
 
+/// Steps accepted by every [`LevenbergMarquardt`] of this process so far.
+static ACCEPTED_STEPS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// How many Levenberg–Marquardt steps every fit of this process has accepted so far: a sign of
+/// life for a long identification that a program can show while it waits (`motorid identify`
+/// prints it with its phase once a second). It only grows; fits running at once share it.
+pub fn accepted_steps() -> u64 {
+    ACCEPTED_STEPS.load(std::sync::atomic::Ordering::Relaxed)
+}
+
 /// `JᵀJ`, `Jᵀr` and the cost `½‖r‖²` at one parameter vector.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NormalEquations {
@@ -376,6 +386,7 @@ impl<P: LeastSquares> Solver<ArgminProblem<'_, P>, LmState> for LevenbergMarquar
                     self.last_cost_rel = (cost - tn.cost) / cost.max(f64::MIN_POSITIVE);
                     self.lambda = (self.lambda / 3.0).max(1e-15);
                     self.last_accepted = true;
+                    ACCEPTED_STEPS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                     let new_cost = tn.cost;
                     self.normal = Some(tn);
                     return Ok((state.param(trial).cost(new_cost), None));

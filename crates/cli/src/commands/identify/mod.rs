@@ -724,7 +724,7 @@ pub fn run(a: &Settings) -> Result<()> {
         .filter_map(|p| std::fs::metadata(p).ok())
         .map(|m| m.len())
         .sum();
-    let phases = Phases::start("identify", a.quiet);
+    let phases = Phases::start_with("identify", a.quiet, fit_steps);
     phases.enter(format!(
         "reading {} and {} ({:.0} MB)",
         high.display(),
@@ -879,7 +879,7 @@ fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Resu
     }
     let given = a.start;
     let samples: usize = loaded.iter().map(|l| l.record.t.len()).sum();
-    let phases = Phases::start("identify", a.quiet);
+    let phases = Phases::start_with("identify", a.quiet, fit_steps);
     phases.enter(format!(
         "fitting {} record(s), {samples} samples, by simulation (about 7 simulations per iteration)",
         loaded.len()
@@ -1109,6 +1109,12 @@ fn diagnose_command(a: &Settings, records: &[(&str, &std::path::Path)]) -> Strin
         words.push(shell_word(&columns));
     }
     words.join(" ")
+}
+
+/// The fit's progress for the lines on standard error: the steps its solver has taken.
+fn fit_steps() -> Option<String> {
+    let steps = fit::accepted_steps();
+    (steps > 0).then(|| format!("{steps} solver steps so far"))
 }
 
 /// The phase of the model check, for the progress on standard error.
