@@ -144,7 +144,8 @@ pub struct Loaded {
     pub lines: Vec<usize>,
     /// Samples of voltage, current and speed at an ADC rail.
     pub clipped: [Vec<bool>; 3],
-    /// One ADC step of the voltage channel \[V\], from the `# measurement:` metadata, if given.
+    /// One ADC step of the voltage channel \[V\], from the `# measurement:` metadata, if given;
+    /// 0 where the metadata says the record was read without an ADC (its voltage is exact).
     pub voltage_lsb: Option<f64>,
     /// One ADC step of the current channel \[A\], likewise.
     pub current_lsb: Option<f64>,
@@ -1115,7 +1116,11 @@ fn to_record(
         record,
         current_on_zero_rail,
         clipped: masks,
-        voltage_lsb: adc_lsb(&table, 0),
+        voltage_lsb: if metadata_says_no_adc(&table) {
+            Some(0.0)
+        } else {
+            adc_lsb(&table, 0)
+        },
         current_lsb: adc_lsb(&table, 1),
         lines: table.lines,
     })

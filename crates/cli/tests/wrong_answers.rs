@@ -923,3 +923,31 @@ fn a_fast_servo_prbs_identifies_the_motor() {
         }
     }
 }
+
+#[test]
+fn an_exact_staircase_is_not_read_as_an_adc_of_its_level_spacing() {
+    // 0, 40, −20, 0 and 2.5 V written exactly are multiples of 2.5 V: the voltage was taken as
+    // read by an ADC of 2.5 V steps, its levels fitted as such inputs, and the exact record
+    // gave R 0.2999941 [0.2999867, 0.3000015]. Its metadata says it was read without an ADC.
+    let dir = scratch("exact-staircase");
+    let path = dir.join("stairs.csv");
+    simulate_to(
+        &path,
+        &[
+            "--levels",
+            "0.5:40,40.5:-20,80.5:0,100.5:2.5",
+            "--duration",
+            "140",
+            "-q",
+        ],
+    );
+    let (v, out) = json_of(&["identify", "--record", path.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    for (name, truth) in TRUTH {
+        let value = v["parameters"][name]["value"].as_f64().unwrap();
+        assert!(
+            ((value - truth) / truth).abs() < 1e-6,
+            "{name} = {value}, truth {truth}"
+        );
+    }
+}

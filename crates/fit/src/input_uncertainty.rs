@@ -51,10 +51,14 @@ pub struct VoltageScale {
 }
 
 impl VoltageScale {
-    /// The scale of `voltage`: `quantum_v` if given (e.g. from a record's metadata), otherwise
-    /// the smallest gap between distinct values when at most a quarter of the samples are
-    /// distinct, there are at least three of them and every gap is a multiple of that smallest
-    /// one (a noise-free column with two values cannot show its quantum: give it).
+    /// The scale of `voltage`: `quantum_v` if given (e.g. from a record's metadata; `Some(0.0)`
+    /// for a column known to be read without an ADC, whose values are then taken as they are),
+    /// otherwise the smallest gap between distinct values when at most a quarter of the samples
+    /// are distinct, there are at least three of them and every gap is a multiple of that
+    /// smallest one (a noise-free column with two values cannot show its quantum: give it). An
+    /// exact staircase of 0, 40, −20 and 2.5 V shows a "quantum" of 2.5 V that way: its levels
+    /// were fitted as inputs of a 2.5 V ADC, and the exact record of the paper's motor gave
+    /// R 0.2999941 [0.2999867, 0.3000015]; told there is no ADC, 0.3000000.
     pub fn of(voltage: &[f64], quantum_v: Option<f64>) -> Self {
         let (min_v, max_v) = voltage
             .iter()
@@ -62,9 +66,10 @@ impl VoltageScale {
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
                 (lo.min(v), hi.max(v))
             });
+        let exact = quantum_v == Some(0.0);
         let quantum_v = quantum_v
             .filter(|q| q.is_finite() && *q > 0.0)
-            .or_else(|| detect_quantum(voltage));
+            .or_else(|| (!exact).then(|| detect_quantum(voltage)).flatten());
         VoltageScale {
             quantum_v,
             min_v,
