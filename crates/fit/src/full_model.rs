@@ -215,9 +215,14 @@ pub fn noise_std(y: &[f64]) -> f64 {
     noise_of_second_differences(y.windows(3).map(squared_second_difference).collect(), y)
 }
 
-/// `(y[i+2] − 2 y[i+1] + y[i])²` of a window of three samples.
+/// `y[i+2] − 2 y[i+1] + y[i]` of a window of three samples.
+pub(crate) fn second_difference(w: &[f64]) -> f64 {
+    w[2] - 2.0 * w[1] + w[0]
+}
+
+/// [`second_difference`] squared.
 pub(crate) fn squared_second_difference(w: &[f64]) -> f64 {
-    (w[2] - 2.0 * w[1] + w[0]).powi(2)
+    second_difference(w).powi(2)
 }
 
 /// [`noise_std`] from the squared second differences `d2` of (parts of) the signal `y`: their

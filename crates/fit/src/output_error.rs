@@ -161,15 +161,16 @@ fn rebuild_voltage(
     // stretches between the jumps found, found again until they hold (the jumps' own second
     // differences in the noise made 0 → −12 V at the head of a ±12 V PRBS of 50 bits a
     // second at 2 kHz look like noise: a 24 V reversal every 40 samples set the level at 15 V).
+    let threshold = |sigma: f64| (10.0 * sigma).max(1e-3 * (hi - lo));
     let mut sigma = noise_std(voltage);
-    let mut starts = jumps(voltage, (10.0 * sigma).max(1e-3 * (hi - lo)));
+    let mut starts = jumps(voltage, threshold(sigma));
     for _ in 0..JUMP_PASSES {
         let flat = noise_between(voltage, &starts);
         if flat >= sigma {
             break;
         }
         sigma = flat;
-        let again = jumps(voltage, (10.0 * sigma).max(1e-3 * (hi - lo)));
+        let again = jumps(voltage, threshold(sigma));
         if again == starts {
             break;
         }
@@ -1118,14 +1119,13 @@ pub fn identify_output_error_with_initial_states(
     )
 }
 
-/// [`identify_output_error_with_initial_states`] from `start`, tried again from other starts
+/// [`identify_output_error_with_initial_states`] from `start`, tried again from another start
 /// where that fit is refused because a friction parameter went to nothing
 /// ([`crate::Refusal::Vanished`]), or so near it that the records no longer determine it
 /// ([`crate::Refusal::Undetermined`] of f or Ts): a start that splits the friction wrongly
 /// between f and Ts can lead the fit into the minimum without one of them. The equation-error
-/// start of a ±12 V
-/// PRBS of the small servo (`fixtures/motors/small_servo.json`, 1 s at 2 kHz through the
-/// logger) put f at 2.3 times its value and Ts at a ninth of it, and the fit drove Ts to
+/// start of a ±12 V PRBS of the small servo (`fixtures/motors/small_servo.json`, 1 s at 2 kHz
+/// through the logger) put f at 2.3 times its value and Ts at a ninth of it, and the fit drove Ts to
 /// 1e-15 N·m on 5 of 6 seeds; from f halved, or from Ts tenfold, it found the motor. The
 /// restart moves the friction towards the vanished parameter: that parameter ten times its
 /// start (at least 1 % and at most half of its scale: the largest motor torque `k·|I|` of the
@@ -1159,30 +1159,26 @@ pub fn identify_output_error_with_friction_restarts(
     // One restart: each costs a whole fit, and a second (a hundredfold, quartered) found no
     // motor the first had missed on the records tried, while it tripled the time of a fit
     // that is refused anyway (an 85,000-sample record at 100 kHz: 7.6 s → 27.6 s).
-    for (raise, lower) in [(10.0, 0.5)] {
-        let moved = |value: f64, scale: f64| (value * raise).clamp(0.01 * scale, 0.5 * scale);
-        let restart = match parameter {
-            "Ts" if torque_scale > 0.0 => MotorParams {
-                ts_nm: moved(start.ts_nm, torque_scale),
-                f_nms_per_rad: start.f_nms_per_rad * lower,
-                ..*start
-            },
-            "f" if damping_scale > 0.0 => MotorParams {
-                f_nms_per_rad: moved(start.f_nms_per_rad, damping_scale),
-                ts_nm: start.ts_nm * lower,
-                ..*start
-            },
-            _ => break,
-        };
-        if let Ok(fit) = identify_output_error_with_initial_states(
-            records, priors, initial, &restart, effects, settings,
-        ) {
-            if fit.accepted() {
-                return Ok((restart, fit));
-            }
-        }
+    let tenfold = |value: f64, scale: f64| (10.0 * value).clamp(0.01 * scale, 0.5 * scale);
+    let restart = match parameter {
+        "Ts" if torque_scale > 0.0 => MotorParams {
+            ts_nm: tenfold(start.ts_nm, torque_scale),
+            f_nms_per_rad: 0.5 * start.f_nms_per_rad,
+            ..*start
+        },
+        "f" if damping_scale > 0.0 => MotorParams {
+            f_nms_per_rad: tenfold(start.f_nms_per_rad, damping_scale),
+            ts_nm: 0.5 * start.ts_nm,
+            ..*start
+        },
+        _ => return Ok((*start, first)),
+    };
+    match identify_output_error_with_initial_states(
+        records, priors, initial, &restart, effects, settings,
+    ) {
+        Ok(fit) if fit.accepted() => Ok((restart, fit)),
+        _ => Ok((*start, first)),
     }
-    Ok((*start, first))
 }
 
 /// [`identify_output_error_with_initial_states`] on RK4 steps `step_factor` times the

@@ -233,8 +233,9 @@ impl StepPairIdentification {
 
     /// Where the full fit's residual on the pair it was fitted to (`high`, `low` as given to
     /// [`identify_step_pair`], named by `names`) exceeds the records' own noise floor
-    /// ([`localise_fit`] with [`LocaliseSettings::model_check`]): a significant finding says the records show something the motor model does not,
-    /// and the intervals, which assume a complete model, do not hold the bias it leaves.
+    /// ([`localise_fit`] with [`LocaliseSettings::model_check`]): a significant finding says
+    /// the records show something the motor model does not, and the intervals, which assume a
+    /// complete model, do not hold the bias it leaves.
     /// Each step record is taken from its step on at its measured height (or whole, rise and
     /// return, where the full fit took it whole). `None` without a full fit.
     pub fn localise(

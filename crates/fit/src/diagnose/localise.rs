@@ -87,7 +87,7 @@ use serde::{Serialize, Serializer};
 use motor_model::Input;
 
 use crate::error::FitError;
-use crate::full_model::{noise_std, Channel};
+use crate::full_model::{noise_std, second_difference, Channel};
 use crate::input_uncertainty::detect_quantum;
 use crate::output_error::voltage_input;
 use crate::stats::{chi_square_sf, f_sf, normal_sf, NeweyWest};
@@ -1076,10 +1076,7 @@ fn quantum_of(x: &[f64]) -> Option<f64> {
 /// median magnitude is 0.6745 of it). 0 for a signal that holds its value in most windows
 /// of three samples (a quantiser without noise).
 fn median_noise(y: &[f64]) -> f64 {
-    let mut d2: Vec<f64> = y
-        .windows(3)
-        .map(|w| (w[2] - 2.0 * w[1] + w[0]).abs())
-        .collect();
+    let mut d2: Vec<f64> = y.windows(3).map(|w| second_difference(w).abs()).collect();
     if d2.is_empty() {
         return 0.0;
     }
@@ -1181,10 +1178,14 @@ fn floor_model(
     let n = y.len();
     let second_difference = noise_std(y);
     let steady = steady_scatter(y);
-    let differences: Vec<f64> = y.windows(2).map(|w| w[1] - w[0]).collect();
+    // Where the values are too many to show the step, their differences can (a 14-bit
+    // record): looked for only where it matters, for `dithered_steps`.
     let adc_step = detect_quantum(y).or_else(|| {
         (dithered_steps > 0.0)
-            .then(|| quantum_of(&differences))
+            .then(|| {
+                let differences: Vec<f64> = y.windows(2).map(|w| w[1] - w[0]).collect();
+                quantum_of(&differences)
+            })
             .flatten()
     });
     let nrmse_floor = |v: &[f64]| {
@@ -1240,11 +1241,14 @@ fn floor_model(
     // at 6 kHz read several steps of "noise"), the flat stretches a staircase's transients
     // (9 steps on a noise-free 10-bit one), the median second difference (robust to the
     // few samples of a PRBS's switches) the least. The smallest is the noise.
-    let measured_noise = steady
-        .unwrap_or(f64::INFINITY)
-        .min(second_difference)
-        .min(median_noise(y));
-    let undithered = adc_step.is_some_and(|q| measured_noise < dithered_steps * q);
+    let undithered = dithered_steps > 0.0
+        && adc_step.is_some_and(|q| {
+            let measured_noise = steady
+                .unwrap_or(f64::INFINITY)
+                .min(second_difference)
+                .min(median_noise(y));
+            measured_noise < dithered_steps * q
+        });
     // A quantiser the noise does not dither errs by up to half a step, held as long as the
     // signal stays within one code: its floor is that bound.
     let adc = adc_step.map(|q| {
