@@ -10,11 +10,8 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Result;
-use fit::diagnose::localise::{Localisation, LocaliseSettings};
-use fit::diagnose::localise_fit;
 use fit::{
-    accuracy, parameter_estimates, summarize, ExcitedRecord, FullFit, ParameterAccuracy,
-    StepMethod, PARAM_NAMES,
+    accuracy, parameter_estimates, summarize, FullFit, ParameterAccuracy, StepMethod, PARAM_NAMES,
 };
 use motor_model::MotorParams;
 use serde_json::{json, Value};
@@ -25,7 +22,7 @@ use crate::record_csv::ColumnMap;
 use crate::steps::{fit_excited, identify_pair, in_order, load_excited, load_step, LoadedExcited};
 use crate::{parallel, settings, BadInput, NotConverged};
 
-use super::Settings;
+use super::{ModelCheck, Settings};
 
 /// Outcome of one folder.
 enum Outcome {
@@ -40,10 +37,8 @@ struct Row {
     truth: Option<MotorParams>,
     /// The fit against `truth`, when both are there.
     against: Option<Vec<ParameterAccuracy>>,
-    /// The model check of an accepted fit ([`fit::diagnose::localise_fit`], as `identify`
-    /// makes it): its findings in words (empty: the residual is the records' noise), or why
-    /// it was not made; `None` for a fit not accepted.
-    model_check: Option<std::result::Result<Vec<String>, String>>,
+    /// The model check of the fit, as `identify` makes it; `None` where the folder gave no fit.
+    model_check: Option<ModelCheck>,
     seconds: f64,
 }
 
@@ -136,19 +131,7 @@ fn identify_folder(folder: &Path) -> Row {
         .then(|| settings::motor(truth_path.to_str().unwrap_or_default()).ok())
         .flatten();
     let (high, low) = (folder.join("high.csv"), folder.join("low.csv"));
-    let check = |l: Option<std::result::Result<Localisation, fit::FitError>>| {
-        l.map(|l| {
-            l.map(|l| {
-                l.significant_findings()
-                    .into_iter()
-                    .map(|f| f.text)
-                    .collect()
-            })
-            .map_err(|e| e.to_string())
-        })
-    };
-    type Checked = (FullFit, Option<std::result::Result<Vec<String>, String>>);
-    let (method, result): (&'static str, Result<Checked>) = if has_step_pair(folder) {
+    let (method, result): (&'static str, Result<(FullFit, ModelCheck)>) = if has_step_pair(folder) {
         let fitted = (|| {
             let (hv, lv) = (
                 load_step(&high, &ColumnMap::default(), true)?,
@@ -156,13 +139,7 @@ fn identify_folder(folder: &Path) -> Row {
             );
             let (hv, lv, _) = in_order(hv, lv);
             let result = identify_pair(&hv, &lv, StepMethod::Full)?;
-            let names = [hv.path.as_str(), lv.path.as_str()];
-            let checked = match &result.full {
-                Some(f) if f.accepted() => {
-                    check(result.localise(&hv.step_record(), &lv.step_record(), &names))
-                }
-                _ => None,
-            };
+            let checked = ModelCheck::of_pair(&result, &hv, &lv, &ColumnMap::default());
             let full = result.full.ok_or_else(|| anyhow::anyhow!("no full fit"))?;
             Ok((full, checked))
         })();
@@ -184,23 +161,13 @@ fn identify_folder(folder: &Path) -> Row {
                 .map(|p| load_excited(p, &ColumnMap::default(), true))
                 .collect::<Result<Vec<LoadedExcited>>>()?;
             let (_, fit) = fit_excited(&loaded, None, &folder.display().to_string(), "")?;
-            let checked = fit.accepted().then(|| {
-                let records: Vec<ExcitedRecord> =
-                    loaded.iter().map(LoadedExcited::excited).collect();
-                let names: Vec<&str> = loaded.iter().map(|l| l.path.as_str()).collect();
-                check(Some(localise_fit(
-                    &records,
-                    &fit.fitted,
-                    &names,
-                    &LocaliseSettings::model_check(),
-                )))
-            });
-            Ok((fit, checked.flatten()))
+            let checked = ModelCheck::of_excited(&fit, &loaded, &ColumnMap::default());
+            Ok((fit, checked))
         })();
         ("output_error", fitted)
     };
     let (outcome, model_check) = match result {
-        Ok((fit, checked)) => (Outcome::Fitted(Box::new(fit)), checked),
+        Ok((fit, checked)) => (Outcome::Fitted(Box::new(fit)), Some(checked)),
         Err(e) => (
             Outcome::Failed {
                 bad_input: e.chain().any(|c| c.is::<BadInput>()),
@@ -237,13 +204,9 @@ fn row_json(r: &Row) -> Value {
                 obj["error"] = json!(why);
             }
             obj["iterations"] = json!(fit.iterations);
-            obj["model_check"] = match &r.model_check {
-                Some(Ok(found)) => {
-                    json!({"made": true, "model_misses": !found.is_empty(), "findings": found})
-                }
-                Some(Err(why)) => json!({"made": false, "reason": why}),
-                None => json!({"made": false, "reason": "the fit is not accepted"}),
-            };
+            if let Some(check) = &r.model_check {
+                obj["model_check"] = check.json();
+            }
             let mut params = serde_json::Map::new();
             for (k, e) in parameter_estimates(&fit.params, fit.ci95.as_ref())
                 .into_iter()
@@ -309,10 +272,10 @@ fn summary_csv(rows: &[Row]) -> String {
                 cell(error.map(|a| 100.0 * a.relative_error))
             ));
         }
-        let check = match &r.model_check {
-            Some(Ok(found)) if found.is_empty() => "noise".to_string(),
-            Some(Ok(found)) => format!("misses ({} findings)", found.len()),
-            Some(Err(_)) | None => String::new(),
+        let check = match r.model_check.as_ref().and_then(ModelCheck::findings) {
+            Some(0) => "noise".to_string(),
+            Some(n) => format!("misses ({n} findings)"),
+            None => String::new(),
         };
         out.push_str(&format!(",{check},\"{message}\"\n"));
     }
@@ -400,7 +363,7 @@ pub fn run(a: &Settings, dir: &Path) -> Result<()> {
         );
         let misses: Vec<&str> = rows
             .iter()
-            .filter(|r| matches!(&r.model_check, Some(Ok(found)) if !found.is_empty()))
+            .filter(|r| r.model_check.as_ref().and_then(ModelCheck::findings) > Some(0))
             .map(|r| r.name.as_str())
             .collect();
         if !misses.is_empty() {

@@ -23,7 +23,7 @@ use crate::record_csv::{read_loaded, read_loaded_current_optional, ColumnMap};
 use crate::settings;
 use crate::steps::{
     common_channels, excited_from, file_lines, fit_excited_from, fit_voltage_speed, identify_pair,
-    in_order, load_step_pair, measured_channels,
+    in_order, load_step_pair, measured_channels, LoadedExcited, LoadedStep,
 };
 use crate::{BadInput, NotConverged};
 
@@ -768,11 +768,8 @@ pub fn run(a: &Settings) -> Result<()> {
     ));
     let result = identify_pair(&hv, &lv, a.method)?;
     phases.enter(MODEL_CHECK_PHASE.into());
-    let check = ModelCheck::of(result.full.as_ref(), || {
-        result.localise(&hv.step_record(), &lv.step_record(), &files)
-    });
+    let check = ModelCheck::of_pair(&result, &hv, &lv, &a.columns);
     drop(phases);
-    let diagnose = diagnose_command(a, &[("--high", high), ("--low", low)]);
     let why = result.paper.as_ref().map_err(ToString::to_string);
     let paper = why.as_ref().copied().map_err(String::as_str);
     let method = result.route.method_name();
@@ -781,7 +778,7 @@ pub fn run(a: &Settings) -> Result<()> {
         let mut report = report_json(method, paper, full, &files);
         if let Some(obj) = report.as_object_mut() {
             obj.insert("record_kind".into(), kinds::kind_json(&kind));
-            obj.insert("model_check".into(), check.json(&diagnose));
+            obj.insert("model_check".into(), check.json());
         }
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -789,7 +786,7 @@ pub fn run(a: &Settings) -> Result<()> {
         let note = result.note();
         let whole = hv.whole.is_some() && lv.whole.is_some();
         print_table(method, whole, paper, full, &files, note.as_deref());
-        check.print(&diagnose);
+        check.print();
     }
     if let (Some(dir), Some(f)) = (&a.plot, full) {
         let records = [&hv, &lv].map(|s| FigureRecord {
@@ -893,22 +890,7 @@ fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Resu
     )?;
     let (start, full) = (fitted.start, fitted.full);
     phases.enter(MODEL_CHECK_PHASE.into());
-    let diagnose = diagnose_command(
-        a,
-        &paths
-            .iter()
-            .map(|p| ("--record", p.as_path()))
-            .collect::<Vec<_>>(),
-    );
-    let check = ModelCheck::of(Some(&full), || {
-        let records: Vec<ExcitedRecord> = loaded.iter().map(|l| l.excited()).collect();
-        Some(fit::diagnose::localise_fit(
-            &records,
-            &full.fitted,
-            &files,
-            &LocaliseSettings::model_check(),
-        ))
-    });
+    let check = ModelCheck::of_excited(&full, &loaded, &a.columns);
     let initial: Vec<(
         &str,
         &fit::DetectedInitialState,
@@ -949,7 +931,7 @@ fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Resu
                 obj.insert("note".into(), note.into());
             }
             obj.insert("record_kind".into(), kinds::kind_json(&kind));
-            obj.insert("model_check".into(), check.json(&diagnose));
+            obj.insert("model_check".into(), check.json());
         }
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -972,7 +954,7 @@ fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Resu
         if let Some(note) = note {
             println!("note: {note}");
         }
-        check.print(&diagnose);
+        check.print();
     }
     if let Some(dir) = &a.plot {
         let records: Vec<FigureRecord> = loaded
@@ -989,8 +971,12 @@ fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Resu
 }
 
 /// What the check of an accepted fit's residual against the records' own noise found
-/// ([`fit::diagnose::localise_fit`]): its significant findings, or why it was not made.
-struct ModelCheck(std::result::Result<Checked, String>);
+/// ([`fit::diagnose::localise_fit`]): its significant findings, or why it was not made; and
+/// the `motorid diagnose` command for the same records.
+struct ModelCheck {
+    result: std::result::Result<Checked, String>,
+    diagnose: String,
+}
 
 /// A check made: the significant findings, and each channel's noise floor.
 struct Checked {
@@ -999,20 +985,59 @@ struct Checked {
 }
 
 impl ModelCheck {
+    /// The check of a step pair's full fit ([`fit::StepPairIdentification::localise`]), the
+    /// records read with `columns`.
+    fn of_pair(
+        result: &fit::StepPairIdentification,
+        hv: &LoadedStep,
+        lv: &LoadedStep,
+        columns: &ColumnMap,
+    ) -> ModelCheck {
+        let names = [hv.path.as_str(), lv.path.as_str()];
+        ModelCheck::of(
+            result.full.as_ref(),
+            diagnose_command(columns, &[("--high", &hv.path), ("--low", &lv.path)]),
+            || result.localise(&hv.step_record(), &lv.step_record(), &names),
+        )
+    }
+
+    /// The check of an output-error fit `full` of the records `loaded`, read with `columns`.
+    fn of_excited(full: &FullFit, loaded: &[LoadedExcited], columns: &ColumnMap) -> ModelCheck {
+        let records: Vec<(&str, &str)> = loaded
+            .iter()
+            .map(|l| ("--record", l.path.as_str()))
+            .collect();
+        ModelCheck::of(Some(full), diagnose_command(columns, &records), || {
+            let excited: Vec<ExcitedRecord> = loaded.iter().map(LoadedExcited::excited).collect();
+            let names: Vec<&str> = loaded.iter().map(|l| l.path.as_str()).collect();
+            Some(fit::diagnose::localise_fit(
+                &excited,
+                &full.fitted,
+                &names,
+                &LocaliseSettings::model_check(),
+            ))
+        })
+    }
+
     /// The check of `full` when it is accepted, from the localisation `run` makes; a refused
     /// or missing fit is not checked, and says why.
     fn of(
         full: Option<&FullFit>,
+        diagnose: String,
         run: impl FnOnce() -> Option<std::result::Result<Localisation, fit::FitError>>,
     ) -> ModelCheck {
         if !full.is_some_and(FullFit::accepted) {
-            return ModelCheck::not_made(if full.is_some() {
-                "the fit is refused"
-            } else {
-                "the paper's method leaves no residual of the whole records to check (--method full checks it)"
-            });
+            return ModelCheck {
+                result: Err(if full.is_some() {
+                    "the fit is refused"
+                } else {
+                    "the paper's method leaves no residual of the whole records to check (--method full checks it)"
+                }
+                .into()),
+                diagnose,
+            };
         }
-        ModelCheck(match run() {
+        let result = match run() {
             Some(Ok(l)) => Ok(Checked {
                 findings: l.significant_findings(),
                 floors: l
@@ -1027,17 +1052,19 @@ impl ModelCheck {
             }),
             Some(Err(e)) => Err(e.to_string()),
             None => Err("no fit to check".into()),
-        })
+        };
+        ModelCheck { result, diagnose }
     }
 
-    /// A check not made, for `why`.
-    fn not_made(why: &str) -> ModelCheck {
-        ModelCheck(Err(why.into()))
+    /// How many findings a check made has: 0 where the residual is the records' noise.
+    fn findings(&self) -> Option<usize> {
+        self.result.as_ref().ok().map(|c| c.findings.len())
     }
 
     /// The `model_check` object of `--json`, with the `diagnose` command for the same records.
-    fn json(&self, diagnose: &str) -> Value {
-        match &self.0 {
+    fn json(&self) -> Value {
+        let diagnose = &self.diagnose;
+        match &self.result {
             Ok(c) => json!({
                 "made": true,
                 "alpha": LocaliseSettings::model_check().alpha,
@@ -1050,12 +1077,13 @@ impl ModelCheck {
         }
     }
 
-    /// The warning of the table when the residual is not the records' noise; `diagnose` is
-    /// the command that looks for the cause on the same records.
-    fn print(&self, diagnose: &str) {
+    /// The warning of the table when the residual is not the records' noise, with the
+    /// command that looks for the cause on the same records.
+    fn print(&self) {
+        let diagnose = &self.diagnose;
         let Ok(Checked {
             findings: found, ..
-        }) = &self.0
+        }) = &self.result
         else {
             return;
         };
@@ -1097,14 +1125,14 @@ fn shell_word(path: &str) -> String {
 }
 
 /// The `motorid diagnose` command for records given as `records` (`--high`, `--low`,
-/// `--record` with their paths), with the `--columns` of `a`.
-fn diagnose_command(a: &Settings, records: &[(&str, &std::path::Path)]) -> String {
+/// `--record` with their paths), read with `columns`.
+fn diagnose_command(columns: &ColumnMap, records: &[(&str, &str)]) -> String {
     let mut words = vec!["motorid".to_string(), "diagnose".to_string()];
     for (option, path) in records {
         words.push(option.to_string());
-        words.push(shell_word(&path.display().to_string()));
+        words.push(shell_word(path));
     }
-    if let Some(columns) = a.columns.as_option() {
+    if let Some(columns) = columns.as_option() {
         words.push("--columns".into());
         words.push(shell_word(&columns));
     }
