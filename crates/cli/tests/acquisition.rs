@@ -172,14 +172,11 @@ fn acquired_records_equal_simulate_and_identify_the_paper_motor() {
 #[cfg(unix)]
 #[test]
 fn acquire_writes_a_fifo_and_a_device_node_in_place() {
-    use std::os::unix::ffi::OsStrExt;
     use std::os::unix::fs::{FileTypeExt, MetadataExt};
     let dir = scratch("acquire-special");
-    let c_path = |p: &Path| std::ffi::CString::new(p.as_os_str().as_bytes()).unwrap();
     let emulator = Emulator::start(&[]);
     let fifo = dir.join("fifo");
-    // SAFETY: a valid NUL-terminated path.
-    assert_eq!(unsafe { libc::mkfifo(c_path(&fifo).as_ptr(), 0o644) }, 0);
+    common::make_fifo(&fifo);
     let (sent, received) = std::sync::mpsc::channel();
     {
         let fifo = fifo.clone();
@@ -197,15 +194,15 @@ fn acquire_writes_a_fifo_and_a_device_node_in_place() {
         .file_type()
         .is_fifo());
     let node = dir.join("null");
-    let dev = libc::makedev(1, 3);
-    // SAFETY: a valid NUL-terminated path.
-    if unsafe { libc::mknod(c_path(&node).as_ptr(), libc::S_IFCHR | 0o666, dev) } != 0 {
-        eprintln!(
-            "device part skipped: mknod of a character device is not permitted here ({})",
-            std::io::Error::last_os_error()
-        );
-        return;
-    }
+    let dev = match common::make_null_device(&node) {
+        Ok(dev) => dev,
+        Err(e) => {
+            eprintln!(
+                "device part skipped: mknod of a character device is not permitted here ({e})"
+            );
+            return;
+        }
+    };
     let out = acquire_for(&emulator.port, "2.5", "1", &node, &[]);
     assert!(out.status.success(), "{}", stderr(&out));
     let meta = std::fs::symlink_metadata(&node).unwrap();

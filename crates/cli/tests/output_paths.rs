@@ -7,14 +7,14 @@
 
 mod common;
 
-use std::ffi::CString;
-use std::os::unix::ffi::OsStrExt;
 use std::os::unix::fs::{FileTypeExt, MetadataExt, OpenOptionsExt};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{assert_bad_input, motorid, scratch, stderr, stdout};
+use common::{
+    assert_bad_input, c_path, make_fifo, make_null_device, motorid, scratch, stderr, stdout,
+};
 
 /// `simulate` of a 1 V step for `duration` seconds at 1 kHz to `path`.
 fn simulate_to(path: &Path, duration: &str) -> Output {
@@ -49,10 +49,6 @@ fn names(dir: &Path) -> Vec<String> {
         .collect();
     names.sort();
     names
-}
-
-fn c_path(path: &Path) -> CString {
-    CString::new(path.as_os_str().as_bytes()).unwrap()
 }
 
 #[test]
@@ -92,8 +88,7 @@ fn a_symlink_is_followed_and_stays_a_link() {
 fn a_fifo_is_streamed_to_its_reader() {
     let dir = scratch("out-fifo");
     let fifo = dir.join("fifo");
-    // SAFETY: a valid NUL-terminated path.
-    assert_eq!(unsafe { libc::mkfifo(c_path(&fifo).as_ptr(), 0o644) }, 0);
+    make_fifo(&fifo);
     let (sent, received) = std::sync::mpsc::channel();
     {
         let fifo = fifo.clone();
@@ -135,15 +130,13 @@ fn a_dash_writes_the_record_to_standard_output_and_no_file() {
 fn a_device_node_is_written_in_place() {
     let dir = scratch("out-device");
     let node = dir.join("null");
-    let dev = libc::makedev(1, 3);
-    // SAFETY: a valid NUL-terminated path.
-    if unsafe { libc::mknod(c_path(&node).as_ptr(), libc::S_IFCHR | 0o666, dev) } != 0 {
-        eprintln!(
-            "skipped: mknod of a character device is not permitted here ({})",
-            std::io::Error::last_os_error()
-        );
-        return;
-    }
+    let dev = match make_null_device(&node) {
+        Ok(dev) => dev,
+        Err(e) => {
+            eprintln!("skipped: mknod of a character device is not permitted here ({e})");
+            return;
+        }
+    };
     let out = simulate_to(&node, "1");
     assert!(out.status.success(), "{}", stderr(&out));
     let meta = std::fs::symlink_metadata(&node).unwrap();
@@ -398,8 +391,7 @@ fn a_fifo_nobody_opens_is_announced_not_silently_waited_on() {
     // in open() without a word: to a user, a hang.
     let dir = scratch("fifo-wait");
     let fifo = dir.join("fifo");
-    // SAFETY: a valid NUL-terminated path.
-    assert_eq!(unsafe { libc::mkfifo(c_path(&fifo).as_ptr(), 0o644) }, 0);
+    make_fifo(&fifo);
     let path = fifo.to_str().unwrap();
     let (mut writer, line) =
         spawn_with_first_error_line(&["simulate", "--voltage", "1", "--duration", "1", "-o", path]);

@@ -204,3 +204,30 @@ pub fn small_servo_steps(dir: &std::path::Path, effect: Option<&str>) -> [String
         path.to_str().unwrap().to_string()
     })
 }
+
+/// `path` as a C string, for the libc calls of the tests.
+#[cfg(unix)]
+pub fn c_path(path: &Path) -> std::ffi::CString {
+    use std::os::unix::ffi::OsStrExt;
+    std::ffi::CString::new(path.as_os_str().as_bytes()).unwrap()
+}
+
+/// Makes a FIFO at `path`.
+#[cfg(unix)]
+pub fn make_fifo(path: &Path) {
+    // SAFETY: a valid NUL-terminated path.
+    assert_eq!(unsafe { libc::mkfifo(c_path(path).as_ptr(), 0o644) }, 0);
+}
+
+/// Makes a copy of the null device (1:3) at `path`: its device number, or why it cannot be
+/// made here (mknod of a character device needs the right to).
+#[cfg(unix)]
+pub fn make_null_device(path: &Path) -> Result<libc::dev_t, std::io::Error> {
+    let dev = libc::makedev(1, 3);
+    // SAFETY: a valid NUL-terminated path.
+    if unsafe { libc::mknod(c_path(path).as_ptr(), libc::S_IFCHR | 0o666, dev) } == 0 {
+        Ok(dev)
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
