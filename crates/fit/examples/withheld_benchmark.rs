@@ -33,6 +33,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         settings.lm.max_iters = n;
         settings.lm.max_evaluations = 5 * n;
     }
+    if let Some(n) = std::env::var("WITHHELD_ROUNDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+    {
+        // Rounds of refits at most (1: the best `refits` candidates alone).
+        settings.refit_rounds = n;
+    }
     if std::env::var_os("WITHHELD_REFIT_ALL").is_some() {
         // Every candidate refitted, whatever its screening score.
         settings.refits = settings.candidates.len();

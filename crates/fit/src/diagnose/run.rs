@@ -27,6 +27,9 @@
 //! their peaks). Each stage first *screens* every candidate by its score statistic at the base
 //! model ([`crate::diagnose::screen`]: one linearisation, no fit); only the best
 //! [`DiagnoseSettings::refits`] are refitted with the motor and judged by the verdict's tests.
+//! A refit starts where the screening's linear step points (`stepped_start`): a cogging
+//! torque at the phase and amplitude of the ripple the residual holds, a drag, brush drop or
+//! Stribeck excess at the size it asks for.
 //! Every refit weights each channel by the noise level the nominal fit found for it, in one
 //! stage (not reweighted by its own residuals): the refit then minimises the very cost its
 //! likelihood-ratio statistic and held-out blocks measure, and cannot trade a channel the
@@ -95,6 +98,15 @@ pub struct DiagnoseSettings {
     /// without the multiple-test correction the verdict applies: lenient, so that a candidate
     /// whose linearisation understates it still gets its refit).
     pub screening_alpha: f64,
+    /// Rounds of refits at most (default 1): from 2, when a refit of a round stops or leaves
+    /// the effect's size undetermined, the next candidates by screening score whose score
+    /// passed are refitted in its place, up to [`DiagnoseSettings::refits`] a round. Measured
+    /// on the withheld-effect benchmark (seed 1, 160 cases), 3 rounds gave the same top-1
+    /// accuracy as 1: a cogging torque screened out behind two unresolved refits was named,
+    /// but the flexible cogging candidate, refitted more often, also took the gaps of a
+    /// Stribeck friction and a brush drop (README); and the cases took longer: off by
+    /// default.
+    pub refit_rounds: usize,
 }
 
 impl Default for DiagnoseSettings {
@@ -118,6 +130,7 @@ impl Default for DiagnoseSettings {
             refits: 2,
             step_factor: 8.0,
             screening_alpha: 0.05,
+            refit_rounds: 1,
         }
     }
 }
@@ -1477,15 +1490,17 @@ fn screen_stage(
     } else {
         Vec::new()
     };
+    // Every candidate's starts at once on rayon's pool (a kind of one start alone would
+    // leave a core idle).
     kinds
-        .iter()
+        .par_iter()
         .map(|&kind| {
             let starts = candidate_starts(kind, &base.motor, base.train, localisation, &cogging);
             let scored: Vec<(Option<Screening>, Effect)> = starts
                 .par_iter()
                 .map(|&effect| {
                     let effects = base.effects.with(effect);
-                    let score = output_error_sensitivity(
+                    let sig = output_error_sensitivity(
                         base.train,
                         &base.motor,
                         &effects,
@@ -1493,9 +1508,11 @@ fn screen_stage(
                         Some(kind),
                         factor,
                     )
-                    .ok()
-                    .map(|sig| projection.score(&sig.jacobian));
-                    (score, effect)
+                    .ok();
+                    let start = sig.as_ref().map_or(effect, |sig| {
+                        stepped_start(effect, base.motor.ts_nm, &sig.jacobian, &projection)
+                    });
+                    (sig.map(|sig| projection.score(&sig.jacobian)), start)
                 })
                 .collect();
             // The first start unless another is testable with a larger statistic.
@@ -1525,6 +1542,88 @@ fn screen_stage(
             (score, start)
         })
         .collect()
+}
+
+/// Largest factor by which [`stepped_start`] grows or shrinks an effect's size \[-\]: the
+/// linear step of a size far from the start's is a guide, not a value.
+const SIZE_STEP_LIMIT: f64 = 1e3;
+
+/// The refit start of `effect` moved by the screening's Gauss–Newton step
+/// ([`BaseProjection::step`], in the fit's coordinates of its parameters, from `signatures`,
+/// their Jacobian columns at the start) where the step is exact in the effect's signature
+/// space, which its response spans to first order in its size:
+/// - a cogging torque `A sin(Nθ + φ)`, `θ = (ln A, φ)`: its columns `A s(φ)` and `A c(φ)`
+///   span the ripple at every phase, so the stepped signature `A (1 + δ₁) s + A δ₂ c` is the
+///   ripple `A' sin(Nθ + φ + ψ)` with `A' = A hypot(1 + δ₁, δ₂)` and `ψ = atan2(δ₂, 1 + δ₁)`.
+///   A refit from the start's phase collapses to `A → 0` when the ripple present is more
+///   than a quarter period away (its first steps shrink `A` before they turn φ);
+/// - an effect whose load or drop is proportional to its first parameter (the drag's `c`,
+///   the brush drop's `Vb`, the Stribeck excess `Tst − Ts`), `θ₁` its logarithm: the step
+///   of that column alone gives the size `v (1 + δ)` the residual asks for (kept when `1 + δ`
+///   is not positive: the residual asks for the opposite sign), within a factor
+///   [`SIZE_STEP_LIMIT`]. The fit's own first step moves `ln v` by `δ`, which overshoots
+///   `e^δ/(1 + δ)` times, and is refused and damped over several iterations.
+///
+/// Other effects keep their start.
+fn stepped_start(
+    effect: Effect,
+    motor_ts: f64,
+    signatures: &DMatrix<f64>,
+    projection: &BaseProjection,
+) -> Effect {
+    let grow = |delta: f64| -> Option<f64> {
+        let m = 1.0 + delta;
+        (m.is_finite() && m > 0.0).then(|| m.clamp(1.0 / SIZE_STEP_LIMIT, SIZE_STEP_LIMIT))
+    };
+    let size_factor = || {
+        if signatures.ncols() == 0 {
+            return None;
+        }
+        let step = projection.step(&signatures.columns(0, 1).into_owned())?;
+        grow(step[0])
+    };
+    match effect {
+        Effect::CoggingTorque(c) => {
+            let Some(step) = projection.step(signatures) else {
+                return effect;
+            };
+            let &[d_ln_a, d_phase] = step.as_slice() else {
+                return effect;
+            };
+            let (along, across) = (1.0 + d_ln_a, d_phase);
+            let gain = along.hypot(across);
+            if gain > 0.0 && gain.is_finite() {
+                Effect::CoggingTorque(CoggingTorque {
+                    amplitude_nm: c.amplitude_nm * gain.min(SIZE_STEP_LIMIT),
+                    phase_rad: (c.phase_rad + across.atan2(along))
+                        .rem_euclid(std::f64::consts::TAU),
+                    ..c
+                })
+            } else {
+                effect
+            }
+        }
+        Effect::QuadraticDrag(d) => size_factor().map_or(effect, |m| {
+            Effect::QuadraticDrag(QuadraticDrag {
+                c_nms2_per_rad2: d.c_nms2_per_rad2 * m,
+            })
+        }),
+        Effect::StribeckFriction(f) if f.static_torque_nm > motor_ts => {
+            size_factor().map_or(effect, |m| {
+                Effect::StribeckFriction(StribeckFriction {
+                    static_torque_nm: motor_ts + (f.static_torque_nm - motor_ts) * m,
+                    ..f
+                })
+            })
+        }
+        Effect::BrushDrop(b) => size_factor().map_or(effect, |m| {
+            Effect::BrushDrop(BrushDrop {
+                drop_v: b.drop_v * m,
+                ..b
+            })
+        }),
+        _ => effect,
+    }
 }
 
 /// One stage: every candidate screened, the best [`DiagnoseSettings::refits`] refitted on top
@@ -1581,9 +1680,11 @@ fn run_stage(
         };
         score(*b).total_cmp(&score(*a))
     });
-    passed.truncate(settings.refits.max(1));
+    let per_round = settings.refits.max(1);
+    passed.truncate(per_round * settings.refit_rounds.max(1));
+    // The first round: the best `refits` by score, and any the screening could not score.
     let mut refit_set: Vec<usize> = (0..kinds.len())
-        .filter(|&k| screens[k].is_none() || passed.contains(&k))
+        .filter(|&k| screens[k].is_none() || passed[..passed.len().min(per_round)].contains(&k))
         .collect();
     refit_set.sort_unstable();
     let screen_of = |k: usize| screens[k];
@@ -1615,6 +1716,7 @@ fn run_stage(
         _ => otherwise,
     };
     let done = std::sync::atomic::AtomicUsize::new(0);
+    let total = std::sync::atomic::AtomicUsize::new(refit_set.len());
     progress(DiagnoseProgress::Candidates {
         stage: stage_no,
         done: 0,
@@ -1710,7 +1812,7 @@ fn run_stage(
         progress(DiagnoseProgress::Candidates {
             stage: stage_no,
             done: d,
-            total: refit_set.len(),
+            total: total.load(std::sync::atomic::Ordering::Relaxed),
         });
         report
     };
@@ -1733,11 +1835,34 @@ fn run_stage(
             });
         (k, result)
     };
-    let mut refitted: Vec<(usize, Refit)> = if settings.threads > 1 {
-        refit_set.par_iter().map(|&k| guarded(k)).collect()
-    } else {
-        refit_set.iter().map(|&k| guarded(k)).collect()
+    let run_round = |set: &[usize]| -> Vec<(usize, Refit)> {
+        if settings.threads > 1 {
+            set.par_iter().map(|&k| guarded(k)).collect()
+        } else {
+            set.iter().map(|&k| guarded(k)).collect()
+        }
     };
+    let mut refitted: Vec<(usize, Refit)> = run_round(&refit_set);
+    // Further rounds while a refit of the last one could not be judged (it stopped, or left
+    // the effect's size undetermined although its screening score passed): the next passed
+    // candidates by score take their place, so that a refit that fails from its start does
+    // not hide an effect that scored a little lower.
+    let mut next = per_round.min(passed.len());
+    loop {
+        let unjudged = refitted
+            .iter()
+            .filter(|(_, (c, _, _))| c.motor.is_none() || c.assessment == Assessment::Unresolved)
+            .count();
+        let judged = refitted.len() - unjudged;
+        if judged >= per_round || next >= passed.len() || unjudged == 0 {
+            break;
+        }
+        let take = (per_round - judged).min(passed.len() - next);
+        let round: Vec<usize> = passed[next..next + take].to_vec();
+        next += take;
+        total.fetch_add(round.len(), std::sync::atomic::Ordering::Relaxed);
+        refitted.extend(run_round(&round));
+    }
     // Every candidate in the order given: refitted, or reported with its screening score.
     let results: Vec<Refit> = (0..kinds.len())
         .map(|k| match refitted.iter().position(|(j, _)| *j == k) {
@@ -1824,6 +1949,64 @@ mod tests {
             })
             .collect();
         (motor, records)
+    }
+
+    #[test]
+    fn the_screening_step_turns_a_cogging_start_to_the_phase_present() {
+        // A 20-per-revolution ripple at φ = 2.5 rad, screened from the start's φ = 0.3 rad
+        // (more than a quarter period away, where a refit collapses to A → 0): the stepped
+        // start has the phase present to within 0.3 rad and the amplitude within a factor 2.
+        let present = CoggingTorque {
+            amplitude_nm: 2e-3,
+            periods_per_rev: 20,
+            phase_rad: 2.5,
+        };
+        let (motor, records) = servo_records(Effects::none().with(Effect::CoggingTorque(present)));
+        let excited: Vec<ExcitedRecord<'_>> = records
+            .iter()
+            .map(|(input, r)| ExcitedRecord {
+                input,
+                dt: 2e-4,
+                current: &r.current,
+                speed: None,
+                position: r.position.as_deref(),
+                exclude_current: None,
+                exclude_speed: None,
+            })
+            .collect();
+        let fitted = predict_with_step_factor(&excited, &motor, &Effects::none(), 8.0).unwrap();
+        let sigmas: Vec<(usize, Channel, f64)> = fitted
+            .iter()
+            .map(|ch| (ch.record, ch.channel, ch.residual_rms()))
+            .collect();
+        let lin = output_error_sensitivity(&excited, &motor, &Effects::none(), &sigmas, None, 8.0)
+            .unwrap();
+        let projection = BaseProjection::new(&lin.residuals, &lin.jacobian, &lin.series).unwrap();
+        let start = Effect::CoggingTorque(CoggingTorque {
+            amplitude_nm: 2e-4,
+            phase_rad: 0.3,
+            ..present
+        });
+        let sig = output_error_sensitivity(
+            &excited,
+            &motor,
+            &Effects::none().with(start),
+            &sigmas,
+            Some(EffectKind::CoggingTorque),
+            8.0,
+        )
+        .unwrap();
+        let Effect::CoggingTorque(moved) =
+            stepped_start(start, motor.ts_nm, &sig.jacobian, &projection)
+        else {
+            panic!("not a cogging torque");
+        };
+        let off = (moved.phase_rad - present.phase_rad + std::f64::consts::PI)
+            .rem_euclid(std::f64::consts::TAU)
+            - std::f64::consts::PI;
+        assert!(off.abs() < 0.3, "{moved:?}");
+        let ratio = moved.amplitude_nm / present.amplitude_nm;
+        assert!((0.5..2.0).contains(&ratio), "{moved:?}");
     }
 
     #[test]

@@ -158,6 +158,41 @@ impl BaseProjection {
     }
 }
 
+impl BaseProjection {
+    /// The Gauss–Newton step `δ` of the candidate's parameters from the point its
+    /// `signatures` (the Jacobian columns of the weighted residuals `simulated − measured`,
+    /// one per parameter) were taken at: `δ = −(PᵀP)⁻¹ Pᵀ r⊥`, `P` the columns with the base
+    /// model's space projected out and `r⊥` the residual that space leaves. `None` when the
+    /// columns are not testable (see [`BaseProjection::score`]).
+    pub fn step(&self, signatures: &DMatrix<f64>) -> Option<DVector<f64>> {
+        if signatures.ncols() == 0
+            || signatures.nrows() != self.residual.len()
+            || signatures.iter().any(|v| !v.is_finite())
+        {
+            return None;
+        }
+        let norms: Vec<f64> = signatures.column_iter().map(|c| c.norm()).collect();
+        if norms.iter().any(|&n| n <= 0.0) {
+            return None;
+        }
+        let mut s = signatures.clone();
+        for (mut col, n) in s.column_iter_mut().zip(&norms) {
+            col /= *n;
+        }
+        let projected = &s - &self.basis * self.basis.tr_mul(&s);
+        let gram = projected.tr_mul(&projected);
+        if gram.clone().symmetric_eigen().eigenvalues.min() < MIN_TESTABLE_EIGENVALUE {
+            return None;
+        }
+        let b = projected.tr_mul(&self.residual);
+        let unit = gram.cholesky()?.solve(&b);
+        Some(DVector::from_iterator(
+            unit.len(),
+            unit.iter().zip(&norms).map(|(d, n)| -d / n),
+        ))
+    }
+}
+
 /// Orthonormal basis of the column space of `m` (its columns scaled to unit length first, so
 /// that parameters of very different units count alike), dropping directions below
 /// [`RANK_TOLERANCE`] of the largest.
@@ -221,6 +256,19 @@ mod tests {
         let base = BaseProjection::new(&r, &j, &[r.len()]).unwrap();
         let score = base.score(&s);
         assert!(score.p_value < 1e-6, "{score:?}");
+    }
+
+    #[test]
+    fn the_step_recovers_the_size_of_an_effect_present() {
+        // y = 10 x² + noise beside a line: the step from a zero curvature is the least-squares
+        // curvature, 10 to within its standard error (about 0.7 here).
+        let (r, j, s) = problem(10.0, 3);
+        let base = BaseProjection::new(&r, &j, &[r.len()]).unwrap();
+        let step = base.step(&s).expect("a step");
+        assert!((step[0] - 10.0).abs() < 3.0, "{step}");
+        // A column the base spans has none.
+        let same = j.columns(0, 1).into_owned();
+        assert!(base.step(&same).is_none());
     }
 
     #[test]
