@@ -9,10 +9,16 @@
 //!
 //! With CASE, only that case is diagnosed and every candidate of every stage printed.
 //!
+//! With `WITHHELD_SEEN=1` each case line also gives its effects' visibility after the nominal
+//! refit (`fit::diagnose::benchmark::visibility_after_refit`), and the summary the top-1
+//! accuracy of the effect cases by that visibility.
+//!
 //! (default seed 1, 160 cases: 20 `none`, 20 with two effects, 120 with one; heavy — minutes
 //! per ten cases on two cores). One line per case as it finishes, the summary at the end.
 
-use fit::diagnose::benchmark::{diagnose_case, run_case, CaseOutcome, Summary};
+use fit::diagnose::benchmark::{
+    diagnose_case, run_case, visibility_after_refit, CaseOutcome, Summary,
+};
 use fit::diagnose::DiagnoseSettings;
 use motor_model::withheld::{benchmark_case, simulate_plant, visibility};
 use motor_model::Input;
@@ -157,12 +163,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         return Ok(());
     }
+    // With WITHHELD_SEEN, each case's visibility after the nominal refit too, and the
+    // accuracy by that visibility at the end.
+    let seen_too = std::env::var_os("WITHHELD_SEEN").is_some();
+    let mut seen: Vec<Option<(f64, f64)>> = Vec::with_capacity(n);
     let mut outcomes: Vec<CaseOutcome> = Vec::with_capacity(n);
     for i in 0..n {
         let case = benchmark_case(seed, i, n)?;
         let o = run_case(&case, &settings);
+        let after = seen_too
+            .then(|| visibility_after_refit(&case, &settings).ok())
+            .flatten();
+        seen.push(after);
+        let after_text = after.map_or(String::new(), |(train, all)| {
+            format!(
+                "  visibility {:.1}, after the nominal refit {train:.1} (training) {all:.1} (all)",
+                case.visibility
+            )
+        });
         println!(
-            "{:>4}  truth {:<45} named {:<45} ratio {:>6}  {:.1} s{}",
+            "{:>4}  truth {:<45} named {:<45} ratio {:>6}  {:.1} s{}{after_text}",
             i,
             o.truth.join("+"),
             match &o.named {
@@ -178,6 +198,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 .map_or(String::new(), |e| format!("  ({e})"))
         );
         outcomes.push(o);
+    }
+    if seen_too {
+        // Top-1 accuracy of the effect cases by their visibility after the nominal refit on
+        // the training records.
+        for at_least in [0.0, 1.0, 2.0, 4.0] {
+            let (mut right, mut cases) = (0, 0);
+            for (o, v) in outcomes.iter().zip(&seen) {
+                if o.truth == ["none"] || !v.is_some_and(|(train, _)| train >= at_least) {
+                    continue;
+                }
+                cases += 1;
+                right += usize::from(o.top1_correct());
+            }
+            println!(
+                "effect cases at least {at_least} noise floors from the nominal refit: {right} of {cases} named first ({:.1} %)",
+                100.0 * right as f64 / cases.max(1) as f64
+            );
+        }
     }
     let s = Summary::of(&outcomes);
     println!("\nconfusion (rows: truth, one effect or none; columns: top-ranked verdict)");

@@ -11,12 +11,15 @@
 //! or `none` for `none`; every case), false alarms on `none`, the share of two-effect cases
 //! with both named, and the median held-out NRMSE after/before of correctly named effects.
 
-use motor_model::withheld::{generate, CaseRecords, CaseSpec};
-use motor_model::{Input, Record, EFFECT_NAMES};
+use motor_model::withheld::{generate, CaseRecords, CaseSpec, RecordRole};
+use motor_model::{Effects, Input, Record, EFFECT_NAMES};
 use serde::Serialize;
 
 use crate::diagnose::run::{diagnose, DiagnoseSettings, Diagnosis};
-use crate::output_error::{equation_error_start, voltage_input, ExcitedRecord};
+use crate::full_model::Channel;
+use crate::output_error::{
+    equation_error_start, fit_output_error, predict_with_step_factor, voltage_input, ExcitedRecord,
+};
 
 /// One case diagnosed.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -151,6 +154,95 @@ pub fn diagnose_case(case: &CaseSpec, settings: &DiagnoseSettings) -> Result<Dia
     diagnose(&train_x, &held_x, &[], &start, settings, &|_| {}).map_err(|e| e.to_string())
 }
 
+/// How visible a case's effects stay once the nominal motor is refitted: the noise-free
+/// records with the effects ([`CaseSpec::traces_with`]), the nominal model (no effect)
+/// fitted to the training records' current and speed by output error (from the true motor,
+/// each channel weighted by its noise floor, `settings`' solver and step), and its prediction
+/// compared with every record. Returns the largest RMS difference of current or speed, in
+/// noise floors, over the training records and over all records. [`CaseSpec::visibility`]
+/// compares with the *true* nominal motor instead: an effect a parameter shift absorbs (a
+/// sensor lag within a sample period is a later step instant; a drag on one step is more
+/// viscous friction) can be many floors from it and none from the nominal fit, where no
+/// diagnosis can see it.
+pub fn visibility_after_refit(
+    case: &CaseSpec,
+    settings: &DiagnoseSettings,
+) -> Result<(f64, f64), String> {
+    let with = case
+        .traces_with(&case.plant_effects())
+        .map_err(|e| e.to_string())?;
+    let floors = case.floors();
+    let dt = 1.0 / case.measurement.rate_hz;
+    let all: Vec<ExcitedRecord<'_>> = case
+        .records
+        .iter()
+        .zip(&with)
+        .map(|(r, tr)| ExcitedRecord {
+            input: &r.input,
+            dt,
+            current: &tr.current,
+            speed: Some(&tr.speed),
+            position: None,
+            exclude_current: None,
+            exclude_speed: None,
+        })
+        .collect();
+    let training: Vec<usize> = case
+        .records
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| matches!(r.role, RecordRole::HighStep | RecordRole::LowStep))
+        .map(|(j, _)| j)
+        .collect();
+    let train: Vec<ExcitedRecord<'_>> = training.iter().map(|&j| all[j]).collect();
+    let sigmas: Vec<(usize, Channel, f64)> = training
+        .iter()
+        .enumerate()
+        .flat_map(|(k, &j)| {
+            [
+                (k, Channel::Current, floors[j].current_a),
+                (k, Channel::Speed, floors[j].speed_rad_s),
+            ]
+        })
+        .collect();
+    let fit = fit_output_error(
+        &train,
+        &[],
+        &[],
+        &case.motor,
+        &Effects::none(),
+        settings.lm,
+        settings.step_factor,
+        Some(&sigmas),
+    )
+    .map_err(|e| e.to_string())?;
+    let predicted =
+        predict_with_step_factor(&all, &fit.params, &Effects::none(), settings.step_factor)
+            .map_err(|e| e.to_string())?;
+    let (mut train_seen, mut all_seen) = (0.0_f64, 0.0_f64);
+    for ch in &predicted {
+        let floor = match ch.channel {
+            Channel::Current => floors[ch.record].current_a,
+            _ => floors[ch.record].speed_rad_s,
+        };
+        let n = ch.model.len().max(1) as f64;
+        let rms = (ch
+            .model
+            .iter()
+            .zip(&ch.measured)
+            .map(|(m, y)| (m - y).powi(2))
+            .sum::<f64>()
+            / n)
+            .sqrt()
+            / floor;
+        all_seen = all_seen.max(rms);
+        if training.contains(&ch.record) {
+            train_seen = train_seen.max(rms);
+        }
+    }
+    Ok((train_seen, all_seen))
+}
+
 /// The benchmark's scores (module docs).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Summary {
@@ -237,5 +329,33 @@ impl Summary {
             failed: outcomes.iter().filter(|o| o.named.is_err()).count(),
             median_seconds: median(outcomes.iter().map(|o| o.seconds).collect()),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use motor_model::withheld::{benchmark_case, case_mix};
+
+    #[test]
+    fn a_case_without_effect_is_invisible_after_the_refit_and_one_with_an_effect_is_not() {
+        let mix = case_mix(1, 16);
+        let settings = DiagnoseSettings::default();
+        let of = |name: &str| {
+            let i = mix
+                .iter()
+                .position(|effects| match effects.as_slice() {
+                    [] => name == "none",
+                    [(n, _)] => *n == name,
+                    _ => false,
+                })
+                .expect("the mix holds the case");
+            benchmark_case(1, i, 16).expect("a case")
+        };
+        let (train, all) = visibility_after_refit(&of("none"), &settings).expect("a refit");
+        assert!(train < 0.05 && all < 0.05, "{train} {all}");
+        let stribeck = of("stribeck_friction");
+        let (train, all) = visibility_after_refit(&stribeck, &settings).expect("a refit");
+        assert!(train > 1.0 && all >= train, "{train} {all}");
     }
 }
