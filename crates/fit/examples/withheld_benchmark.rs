@@ -120,6 +120,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             for r in &d.localisation.records {
                 for c in &r.channels {
+                    println!(
+                        "  {} {:?}: floor {:.3e} ({:?}), residual/floor² {:.2}, p {:.2e}",
+                        r.name,
+                        c.channel,
+                        c.floor.sigma,
+                        c.floor.source,
+                        c.overall.ratio,
+                        c.overall.p_value
+                    );
                     if let Some(a) = &c.angle_ripple {
                         println!(
                             "  {} {:?}: angle ripple N {} over {} samples, p {:.2e}",

@@ -206,6 +206,29 @@ fn current_sensor_lag_gap_is_in_the_rise_of_the_current() {
     }
 }
 
+/// A record of a current channel alone, `measured` against `model`.
+fn current_only<'a>(
+    name: &'a str,
+    dt: f64,
+    voltage: &'a [f64],
+    measured: &'a [f64],
+    model: &'a [f64],
+) -> ResidualRecord<'a> {
+    ResidualRecord {
+        name,
+        dt,
+        voltage,
+        current: Some(measured),
+        speed: None,
+        angle: None,
+        channels: vec![ResidualChannel {
+            kind: Channel::Current,
+            measured,
+            model,
+        }],
+    }
+}
+
 /// (f) Ljung–Box: a white residual passes, an AR(1) residual (φ = 0.6, same variance) fails.
 #[test]
 fn ljung_box_passes_white_and_flags_ar1_residuals() {
@@ -230,19 +253,13 @@ fn ljung_box_passes_white_and_flags_ar1_residuals() {
                 .zip(noise.iter())
                 .map(|(m, e)| m + e)
                 .collect();
-            let rec = ResidualRecord {
-                name: "synthetic",
-                dt: base.dt,
-                voltage: &base.voltage,
-                current: Some(&measured),
-                speed: None,
-                angle: None,
-                channels: vec![ResidualChannel {
-                    kind: Channel::Current,
-                    measured: &measured,
-                    model: &base.model_current,
-                }],
-            };
+            let rec = current_only(
+                "synthetic",
+                base.dt,
+                &base.voltage,
+                &measured,
+                &base.model_current,
+            );
             let loc = localise(&[rec], &LocaliseSettings::default()).expect("localise");
             let w = &loc.records[0].channels[0].whiteness;
             assert!(w.tested);
@@ -259,6 +276,41 @@ fn ljung_box_passes_white_and_flags_ar1_residuals() {
             }
         }
     }
+}
+
+/// The steady-state scatter of a current whose transients are shorter than its blocks (L/R
+/// below the sample period: a spike of a few samples at each switch of a square wave) is the
+/// noise, not the spikes: before, the few blocks holding a spike, nearly trendless, were pooled
+/// with the quiet ones.
+#[test]
+fn the_steady_scatter_of_a_current_with_short_spikes_is_its_noise() {
+    let sigma = 1e-3;
+    let n = 4000;
+    let mut rng = NoiseRng::new(3);
+    // A square wave of ±0.2 A switching every 400 samples, with a decaying spike of 2 A over
+    // the first three samples after each switch.
+    let model: Vec<f64> = (0..n)
+        .map(|i| {
+            let since = i % 400;
+            let level: f64 = if (i / 400) % 2 == 0 { 0.2 } else { -0.2 };
+            let spike = if since < 3 {
+                2.0 * level.signum() * 0.3f64.powi(since as i32) * 5.0
+            } else {
+                0.0
+            };
+            level + spike
+        })
+        .collect();
+    let measured: Vec<f64> = model.iter().map(|m| m + sigma * rng.normal()).collect();
+    let voltage = vec![1.0; n];
+    let rec = current_only("spikes", 1e-3, &voltage, &measured, &model);
+    let loc = localise(&[rec], &LocaliseSettings::default()).expect("localise");
+    let floor = &loc.records[0].channels[0].floor;
+    let steady = floor.steady_scatter.expect("flat blocks");
+    assert!(
+        (0.8 * sigma..1.2 * sigma).contains(&steady),
+        "steady scatter {steady} against a noise of {sigma}: {floor:?}"
+    );
 }
 
 /// A record that reverses: +6 V, −6 V, then off. Its phases name the reversal (from the new

@@ -1951,6 +1951,35 @@ mod tests {
         (motor, records)
     }
 
+    /// The records of [`servo_records`] as the diagnosis takes them (encoder angle, 5 kHz).
+    fn excited_of(records: &[(Input, Record)]) -> Vec<ExcitedRecord<'_>> {
+        records
+            .iter()
+            .map(|(input, r)| ExcitedRecord {
+                input,
+                dt: 2e-4,
+                current: &r.current,
+                speed: None,
+                position: r.position.as_deref(),
+                exclude_current: None,
+                exclude_speed: None,
+            })
+            .collect()
+    }
+
+    /// The nominal `motor`'s prediction of `excited` and each channel's residual level.
+    fn nominal_of(
+        excited: &[ExcitedRecord<'_>],
+        motor: &MotorParams,
+    ) -> (Vec<FittedChannel>, Vec<(usize, Channel, f64)>) {
+        let fitted = predict_with_step_factor(excited, motor, &Effects::none(), 8.0).unwrap();
+        let sigmas = fitted
+            .iter()
+            .map(|ch| (ch.record, ch.channel, ch.residual_rms()))
+            .collect();
+        (fitted, sigmas)
+    }
+
     #[test]
     fn the_screening_step_turns_a_cogging_start_to_the_phase_present() {
         // A 20-per-revolution ripple at φ = 2.5 rad, screened from the start's φ = 0.3 rad
@@ -1962,23 +1991,8 @@ mod tests {
             phase_rad: 2.5,
         };
         let (motor, records) = servo_records(Effects::none().with(Effect::CoggingTorque(present)));
-        let excited: Vec<ExcitedRecord<'_>> = records
-            .iter()
-            .map(|(input, r)| ExcitedRecord {
-                input,
-                dt: 2e-4,
-                current: &r.current,
-                speed: None,
-                position: r.position.as_deref(),
-                exclude_current: None,
-                exclude_speed: None,
-            })
-            .collect();
-        let fitted = predict_with_step_factor(&excited, &motor, &Effects::none(), 8.0).unwrap();
-        let sigmas: Vec<(usize, Channel, f64)> = fitted
-            .iter()
-            .map(|ch| (ch.record, ch.channel, ch.residual_rms()))
-            .collect();
+        let excited = excited_of(&records);
+        let (_, sigmas) = nominal_of(&excited, &motor);
         let lin = output_error_sensitivity(&excited, &motor, &Effects::none(), &sigmas, None, 8.0)
             .unwrap();
         let projection = BaseProjection::new(&lin.residuals, &lin.jacobian, &lin.series).unwrap();
@@ -2021,23 +2035,8 @@ mod tests {
                 phase_rad: 0.4,
             });
             let (motor, records) = servo_records(Effects::none().with(cogging));
-            let excited: Vec<ExcitedRecord<'_>> = records
-                .iter()
-                .map(|(input, r)| ExcitedRecord {
-                    input,
-                    dt: 2e-4,
-                    current: &r.current,
-                    speed: None,
-                    position: r.position.as_deref(),
-                    exclude_current: None,
-                    exclude_speed: None,
-                })
-                .collect();
-            let fitted = predict_with_step_factor(&excited, &motor, &Effects::none(), 8.0).unwrap();
-            let sigmas: Vec<(usize, Channel, f64)> = fitted
-                .iter()
-                .map(|ch| (ch.record, ch.channel, ch.residual_rms()))
-                .collect();
+            let excited = excited_of(&records);
+            let (fitted, sigmas) = nominal_of(&excited, &motor);
             let base = Base {
                 motor,
                 effects: Effects::none(),
