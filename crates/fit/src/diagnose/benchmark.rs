@@ -225,16 +225,7 @@ pub fn visibility_after_refit(
             Channel::Current => floors[ch.record].current_a,
             _ => floors[ch.record].speed_rad_s,
         };
-        let n = ch.model.len().max(1) as f64;
-        let rms = (ch
-            .model
-            .iter()
-            .zip(&ch.measured)
-            .map(|(m, y)| (m - y).powi(2))
-            .sum::<f64>()
-            / n)
-            .sqrt()
-            / floor;
+        let rms = ch.residual_rms() / floor;
         all_seen = all_seen.max(rms);
         if training.contains(&ch.record) {
             train_seen = train_seen.max(rms);
