@@ -106,65 +106,12 @@ impl BaseProjection {
         })
     }
 
-    /// The score test of an effect whose signatures are the columns of `signatures` (module
-    /// docs).
-    pub fn score(&self, signatures: &DMatrix<f64>) -> Screening {
-        let untestable = Screening {
-            statistic: 0.0,
-            dof: 0,
-            p_value: 1.0,
-            testable: false,
-        };
-        if signatures.ncols() == 0
-            || signatures.nrows() != self.residual.len()
-            || signatures.iter().any(|v| !v.is_finite())
-        {
-            return untestable;
-        }
-        // Each signature scaled to unit length, then projected off the base columns.
-        let mut s = signatures.clone();
-        for mut col in s.column_iter_mut() {
-            let norm = col.norm();
-            if norm > 0.0 {
-                col /= norm;
-            }
-        }
-        let projected = &s - &self.basis * self.basis.tr_mul(&s);
-        let gram = projected.tr_mul(&projected);
-        let b = projected.tr_mul(&self.residual);
-        let eigen = gram.symmetric_eigen();
-        let smallest = eigen
-            .eigenvalues
-            .iter()
-            .copied()
-            .fold(f64::INFINITY, f64::min);
-        if smallest.is_nan() || smallest < MIN_TESTABLE_EIGENVALUE {
-            return untestable;
-        }
-        let along = eigen.eigenvectors.tr_mul(&b);
-        let quadratic: f64 = along
-            .iter()
-            .zip(eigen.eigenvalues.iter())
-            .map(|(a, l)| a * a / l)
-            .sum();
-        let dof = signatures.ncols();
-        let statistic = quadratic / self.factor;
-        Screening {
-            statistic,
-            dof,
-            p_value: chi_square_sf(statistic, dof as f64),
-            testable: true,
-        }
-    }
-}
-
-impl BaseProjection {
-    /// The Gauss–Newton step `δ` of the candidate's parameters from the point its
-    /// `signatures` (the Jacobian columns of the weighted residuals `simulated − measured`,
-    /// one per parameter) were taken at: `δ = −(PᵀP)⁻¹ Pᵀ r⊥`, `P` the columns with the base
-    /// model's space projected out and `r⊥` the residual that space leaves. `None` when the
-    /// columns are not testable (see [`BaseProjection::score`]).
-    pub fn step(&self, signatures: &DMatrix<f64>) -> Option<DVector<f64>> {
+    /// `signatures` with every column scaled to unit length and projected off the base
+    /// columns: the columns' norms, the eigen-decomposition of the projected columns' Gram
+    /// matrix and their products with the projected residual. `None` when the columns are
+    /// empty, of another length than the residual, not finite, or not testable (a zero column,
+    /// or a direction keeping less than [`MIN_TESTABLE_EIGENVALUE`] of its length).
+    fn projected(&self, signatures: &DMatrix<f64>) -> Option<Projected> {
         if signatures.ncols() == 0
             || signatures.nrows() != self.residual.len()
             || signatures.iter().any(|v| !v.is_finite())
@@ -180,17 +127,78 @@ impl BaseProjection {
             col /= *n;
         }
         let projected = &s - &self.basis * self.basis.tr_mul(&s);
-        let gram = projected.tr_mul(&projected);
-        if gram.clone().symmetric_eigen().eigenvalues.min() < MIN_TESTABLE_EIGENVALUE {
+        let eigen = projected.tr_mul(&projected).symmetric_eigen();
+        let smallest = eigen
+            .eigenvalues
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min);
+        if smallest.is_nan() || smallest < MIN_TESTABLE_EIGENVALUE {
             return None;
         }
         let b = projected.tr_mul(&self.residual);
-        let unit = gram.cholesky()?.solve(&b);
+        Some(Projected { norms, eigen, b })
+    }
+
+    /// The score test of an effect whose signatures are the columns of `signatures` (module
+    /// docs).
+    pub fn score(&self, signatures: &DMatrix<f64>) -> Screening {
+        let Some(p) = self.projected(signatures) else {
+            return Screening {
+                statistic: 0.0,
+                dof: 0,
+                p_value: 1.0,
+                testable: false,
+            };
+        };
+        let along = p.eigen.eigenvectors.tr_mul(&p.b);
+        let quadratic: f64 = along
+            .iter()
+            .zip(p.eigen.eigenvalues.iter())
+            .map(|(a, l)| a * a / l)
+            .sum();
+        let dof = signatures.ncols();
+        let statistic = quadratic / self.factor;
+        Screening {
+            statistic,
+            dof,
+            p_value: chi_square_sf(statistic, dof as f64),
+            testable: true,
+        }
+    }
+
+    /// The Gauss–Newton step `δ` of the candidate's parameters from the point its
+    /// `signatures` (the Jacobian columns of the weighted residuals `simulated − measured`,
+    /// one per parameter) were taken at: `δ = −(PᵀP)⁻¹ Pᵀ r⊥`, `P` the columns with the base
+    /// model's space projected out and `r⊥` the residual that space leaves. `None` when the
+    /// columns are not testable (see [`BaseProjection::score`]).
+    pub fn step(&self, signatures: &DMatrix<f64>) -> Option<DVector<f64>> {
+        let p = self.projected(signatures)?;
+        // (PᵀP)⁻¹ Pᵀ r⊥ in the unit columns' coordinates, from the Gram matrix's eigenpairs.
+        let along = p.eigen.eigenvectors.tr_mul(&p.b);
+        let scaled = DVector::from_iterator(
+            along.len(),
+            along
+                .iter()
+                .zip(p.eigen.eigenvalues.iter())
+                .map(|(a, l)| a / l),
+        );
+        let unit = &p.eigen.eigenvectors * scaled;
         Some(DVector::from_iterator(
             unit.len(),
-            unit.iter().zip(&norms).map(|(d, n)| -d / n),
+            unit.iter().zip(&p.norms).map(|(d, n)| -d / n),
         ))
     }
+}
+
+/// Candidate columns as [`BaseProjection::projected`] leaves them.
+struct Projected {
+    /// The columns' norms before they were scaled to unit length.
+    norms: Vec<f64>,
+    /// Eigen-decomposition of the projected unit columns' Gram matrix.
+    eigen: nalgebra::SymmetricEigen<f64, nalgebra::Dyn>,
+    /// The projected unit columns' products with the projected residual.
+    b: DVector<f64>,
 }
 
 /// Orthonormal basis of the column space of `m` (its columns scaled to unit length first, so
