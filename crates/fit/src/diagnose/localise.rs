@@ -1150,9 +1150,8 @@ fn steady_scatter(y: &[f64]) -> Option<f64> {
     if flat.len() < MIN_FLAT_BLOCKS {
         return None;
     }
-    let mut sorted = flat.clone();
-    sorted.sort_by(f64::total_cmp);
-    let median = sorted[sorted.len() / 2];
+    flat.sort_by(f64::total_cmp);
+    let median = flat[flat.len() / 2];
     let kept: Vec<f64> = flat
         .into_iter()
         .filter(|&rss| rss <= SCATTER_OUTLIER * SCATTER_OUTLIER * median)
@@ -1197,6 +1196,7 @@ fn floor_model(
     let y = ch.measured;
     let n = y.len();
     let second_difference = noise_std(y);
+    let median_difference = median_noise(y);
     let steady = steady_scatter(y);
     // Where the values are too many to show the step, their differences can (a 14-bit
     // record): looked for only where it matters, for `dithered_steps`.
@@ -1266,7 +1266,7 @@ fn floor_model(
             let measured_noise = steady
                 .unwrap_or(f64::INFINITY)
                 .min(second_difference)
-                .min(median_noise(y));
+                .min(median_difference);
             measured_noise < dithered_steps * q
         });
     // A quantiser the noise does not dither errs by up to half a step, held as long as the
@@ -1285,7 +1285,7 @@ fn floor_model(
     // noise, while the median of a quantised record's second differences, which are whole
     // steps, rounds to a step (1.2 times the noise at one step of noise): each errs where
     // the other does not.
-    let mut sigma = second_difference.min(median_noise(y));
+    let mut sigma = second_difference.min(median_difference);
     let mut source = FloorSource::SecondDifference;
     for (s, src) in [
         (steady, FloorSource::SteadyScatter),
