@@ -64,6 +64,8 @@ const STEP_MARGIN: f64 = 0.5;
 // A record sampled fifty times slower than τe took minutes a fit at 1000 steps a sample, for
 // an L that its current, settled at every sample, cannot show.
 const MAX_STEPS_PER_SAMPLE: f64 = 200.0;
+/// What a [`FitError::BadData`] of a start the records' sample rate cannot simulate names.
+pub(crate) const START_SERIES: &str = "start parameters";
 /// Speed bound of the simulations over the largest measured |speed| (room for the fitted
 /// motor to run faster than the records while the step stays fixed).
 const SPEED_BOUND_MARGIN: f64 = 1.5;
@@ -1220,12 +1222,12 @@ pub(crate) fn fit_output_error(
     let theta0 = problem.with_state_guesses(problem.parameters.encode(start, effects)?);
     let h = problem
         .step_for(start, effects)
-        .ok_or_else(|| bad("start parameters", "not simulable".into()))?;
+        .ok_or_else(|| bad(START_SERIES, "not simulable".into()))?;
     problem.max_step_bits.store(h.to_bits(), Ordering::Relaxed);
     if priors.is_empty() {
         problem.set_step_for(start, effects).ok_or_else(|| {
             bad(
-                "start parameters",
+                START_SERIES,
                 "a time constant (L/R or the mechanical one) more than 2.5 times below the sample period: \
                  the records cannot show it; give a start that matches them"
                     .into(),

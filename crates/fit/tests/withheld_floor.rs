@@ -12,6 +12,8 @@
 //! before blocks of the training records were held out beside the validation records (five of
 //! seven: it also missed the two-node thermal drift of case 1, whose held-out records it
 //! judged on the reversal and staircase alone).
+//!
+//! A second test diagnoses one case of the 160 whose refit used to be refused at its start.
 
 use fit::diagnose::benchmark::{run_case, CaseOutcome, Summary};
 use fit::diagnose::DiagnoseSettings;
@@ -54,4 +56,17 @@ fn withheld_effects_are_named_above_the_floor_and_none_raises_no_alarm() {
         "top-1 accuracy {:.2} below {TOP1_FLOOR}: {table:#?}",
         s.top1_accuracy
     );
+}
+
+#[test]
+fn a_refit_whose_stepped_start_the_sample_rate_cannot_simulate_starts_unstepped() {
+    // Case 100 of seed 1's 160: a brush drop (its logarithmic form) 15 noise floors from the
+    // nominal motor. The screening's step grows the drop until its knee puts a resistance
+    // `Vb/I_knee` in series that makes L/R shorter than the records can simulate; the refit
+    // was refused ("start parameters: a time constant … below the sample period") and the
+    // verdict was `none`. From the start before the step it names the drop.
+    let case = benchmark_case(SEED, 100, 160).expect("a case of the benchmark");
+    let outcome = run_case(&case, &DiagnoseSettings::default());
+    assert_eq!(outcome.truth, ["brush_drop"]);
+    assert_eq!(outcome.verdict(), "brush_drop", "{outcome:?}");
 }

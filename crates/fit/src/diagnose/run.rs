@@ -29,7 +29,8 @@
 //! [`DiagnoseSettings::refits`] are refitted with the motor and judged by the verdict's tests.
 //! A refit starts where the screening's linear step points (`stepped_start`): a cogging
 //! torque at the phase and amplitude of the ripple the residual holds, a drag, brush drop or
-//! Stribeck excess at the size it asks for.
+//! Stribeck excess at the size it asks for; from the start before the step when the stepped
+//! one is too fast for the records' sample rate to simulate (`RefitStart`).
 //! Every refit weights each channel by the noise level the nominal fit found for it, in one
 //! stage (not reweighted by its own residuals): the refit then minimises the very cost its
 //! likelihood-ratio statistic and held-out blocks measure, and cannot trade a channel the
@@ -57,6 +58,7 @@ use crate::full_model::{Channel, FittedChannel, FullFit, PARAM_NAMES};
 use crate::lm::LmSettings;
 use crate::output_error::{
     fit_output_error, output_error_sensitivity, predict_with_step_factor, ExcitedRecord,
+    START_SERIES,
 };
 use crate::parameters::EffectEstimate;
 
@@ -1464,7 +1466,7 @@ fn screen_stage(
     sigmas: &[(usize, Channel, f64)],
     localisation: &Localisation,
     settings: &DiagnoseSettings,
-) -> Vec<(Option<Screening>, Effect)> {
+) -> Vec<(Option<Screening>, RefitStart)> {
     let factor = settings.step_factor;
     let projection =
         output_error_sensitivity(base.train, &base.motor, &base.effects, sigmas, None, factor)
@@ -1480,7 +1482,7 @@ fn screen_stage(
             .map(|&kind| {
                 (
                     None,
-                    candidate_start(kind, &base.motor, base.train, localisation),
+                    RefitStart::plain(candidate_start(kind, &base.motor, base.train, localisation)),
                 )
             })
             .collect();
@@ -1496,7 +1498,7 @@ fn screen_stage(
         .par_iter()
         .map(|&kind| {
             let starts = candidate_starts(kind, &base.motor, base.train, localisation, &cogging);
-            let scored: Vec<(Option<Screening>, Effect)> = starts
+            let scored: Vec<(Option<Screening>, RefitStart)> = starts
                 .par_iter()
                 .map(|&effect| {
                     let effects = base.effects.with(effect);
@@ -1509,9 +1511,12 @@ fn screen_stage(
                         factor,
                     )
                     .ok();
-                    let start = sig.as_ref().map_or(effect, |sig| {
-                        stepped_start(effect, base.motor.ts_nm, &sig.jacobian, &projection)
-                    });
+                    let start = RefitStart {
+                        stepped: sig.as_ref().map_or(effect, |sig| {
+                            stepped_start(effect, base.motor.ts_nm, &sig.jacobian, &projection)
+                        }),
+                        plain: effect,
+                    };
                     (sig.map(|sig| projection.score(&sig.jacobian)), start)
                 })
                 .collect();
@@ -1530,7 +1535,7 @@ fn screen_stage(
                         best
                     }
                 })
-                .unwrap_or((None, starts[0]));
+                .unwrap_or((None, RefitStart::plain(starts[0])));
             // A fixed shape picked as the best of several (a cogging torque's period count)
             // has its screening p-value multiplied by their number (Bonferroni), so that the
             // best of the noise does not take a refit from an effect present.
@@ -1542,6 +1547,29 @@ fn screen_stage(
             (score, start)
         })
         .collect()
+}
+
+/// Where a candidate's refit begins: the screening's linear step from a start of
+/// [`candidate_starts`] ([`stepped_start`]), and that start itself, which the refit falls
+/// back to when the step lands where the records' sample rate cannot simulate (a brush drop
+/// grown a hundredfold puts a resistance `Vb/I_knee` in series that makes `L/R` far shorter
+/// than a sample period).
+#[derive(Debug, Clone, Copy)]
+struct RefitStart {
+    /// The stepped start.
+    stepped: Effect,
+    /// The start before the step.
+    plain: Effect,
+}
+
+impl RefitStart {
+    /// A start without a step.
+    fn plain(effect: Effect) -> Self {
+        RefitStart {
+            stepped: effect,
+            plain: effect,
+        }
+    }
 }
 
 /// Largest factor by which [`stepped_start`] grows or shrinks an effect's size \[-\]: the
@@ -1646,7 +1674,7 @@ fn run_stage(
     let heldout_before = nrmse_summary(&base.fitted, held_mask);
     let sse_before = block_sse(&base.fitted, sigmas, held, block);
     progress(DiagnoseProgress::Screening { stage: stage_no });
-    let (screens, starts): (Vec<Option<Screening>>, Vec<Effect>) =
+    let (screens, starts): (Vec<Option<Screening>>, Vec<RefitStart>) =
         screen_stage(kinds, base, sigmas, localisation, settings)
             .into_iter()
             .unzip();
@@ -1724,21 +1752,29 @@ fn run_stage(
     });
     let refit = |k: usize| -> Refit {
         let kind = kinds[k];
-        let effects = base.effects.with(starts[k]);
         // In the weights the base model was fitted and every candidate is judged in (the
         // nominal fit's channel levels): a refit reweighted by its own residuals would
         // minimise another cost than the one its likelihood-ratio test and held-out blocks
         // measure, and could trade a channel the effect does not touch for one it does.
-        let outcome = fit_output_error(
-            base.train,
-            &[],
-            &[],
-            &base.motor,
-            &effects,
-            settings.lm,
-            settings.step_factor,
-            Some(sigmas),
-        )
+        let fit_from = |start: Effect| {
+            fit_output_error(
+                base.train,
+                &[],
+                &[],
+                &base.motor,
+                &base.effects.with(start),
+                settings.lm,
+                settings.step_factor,
+                Some(sigmas),
+            )
+        };
+        let RefitStart { stepped, plain } = starts[k];
+        let outcome = match fit_from(stepped) {
+            Err(FitError::BadData { series, .. }) if series == START_SERIES && stepped != plain => {
+                fit_from(plain)
+            }
+            other => other,
+        }
         .map_err(|e| e.to_string())
         .and_then(|fit| match (&fit.refusal, fit.failure()) {
             (_, None) => Ok(fit),
@@ -1803,7 +1839,12 @@ fn run_stage(
                 )
             }
             Err(why) => (
-                unfitted(k, effects, by_score(k, Assessment::Unresolved), Some(why)),
+                unfitted(
+                    k,
+                    base.effects.with(starts[k].stepped),
+                    by_score(k, Assessment::Unresolved),
+                    Some(why),
+                ),
                 Vec::new(),
                 None,
             ),
@@ -1870,7 +1911,7 @@ fn run_stage(
             None => (
                 unfitted(
                     k,
-                    base.effects.with(starts[k]),
+                    base.effects.with(starts[k].stepped),
                     by_score(k, Assessment::ScreenedOut),
                     None,
                 ),
