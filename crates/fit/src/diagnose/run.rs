@@ -1118,12 +1118,13 @@ fn candidate_start(
             periods_per_rev: ripple_periods(localisation),
             phase_rad: 0.3,
         }),
-        // A tenth of a sample period: small beside anything a record resolves, so that the
-        // screening's signature is the lag's at zero size (the simulator advances the filter
-        // exactly, so no time constant of it bounds the step).
-        EffectKind::CurrentSensorLag => {
-            Effect::CurrentSensorLag(CurrentSensorLag { tau_f_s: 0.1 * dt })
-        }
+        // A tenth of the sample period or of L/R, whichever is shorter: small beside anything
+        // a record resolves, and beside the rise of a current whose L/R is below the sample
+        // period, so that the screening's signature is the lag's at zero size (the simulator
+        // advances the filter exactly, so no time constant of it bounds the step).
+        EffectKind::CurrentSensorLag => Effect::CurrentSensorLag(CurrentSensorLag {
+            tau_f_s: 0.1 * dt.min(motor.l_henry / motor.r_ohm),
+        }),
         EffectKind::ThermalDrift => {
             // A rise of a few kelvin over the records' span at their mean copper loss.
             let loss = records
@@ -1517,7 +1518,19 @@ fn screen_stage(
                         }),
                         plain: effect,
                     };
-                    (sig.map(|sig| projection.score(&sig.jacobian)), start)
+                    let score = sig.map(|sig| {
+                        let score = projection.score(&sig.jacobian);
+                        if asks_for_negative_size(kind, &sig.jacobian, &projection) {
+                            Screening {
+                                statistic: 0.0,
+                                p_value: 1.0,
+                                ..score
+                            }
+                        } else {
+                            score
+                        }
+                    });
+                    (score, start)
                 })
                 .collect();
             // The first start unless another is testable with a larger statistic.
@@ -1570,6 +1583,28 @@ impl RefitStart {
             plain: effect,
         }
     }
+}
+
+/// Whether the residual asks `kind`, an effect of one parameter whose response is
+/// proportional to it at small sizes (a sensor lag's `τf`, a drag's `c`, a brush drop's `Vb`),
+/// for a size below zero: the screening's linear step from zero size ([`BaseProjection::step`]
+/// of its signature) is negative. No size of such an effect explains that residual (a current
+/// read *ahead* of the model is no lag, a drag that pushes is no drag), so its screening is
+/// one-sided: statistic 0, and the refit goes to a candidate that could explain the residual.
+fn asks_for_negative_size(
+    kind: EffectKind,
+    signatures: &DMatrix<f64>,
+    projection: &BaseProjection,
+) -> bool {
+    let one_sided = matches!(
+        kind,
+        EffectKind::CurrentSensorLag | EffectKind::QuadraticDrag | EffectKind::BrushDrop
+    );
+    one_sided
+        && signatures.ncols() == 1
+        && projection
+            .step(signatures)
+            .is_some_and(|step| step[0] < 0.0)
 }
 
 /// Largest factor by which [`stepped_start`] grows or shrinks an effect's size \[-\]: the
@@ -2099,6 +2134,40 @@ mod tests {
                 "N = {n} ranked {at:?}: {:?}",
                 &ranked[..8]
             );
+        }
+    }
+
+    #[test]
+    fn a_size_only_effect_asked_for_a_negative_size_screens_at_zero() {
+        // A base of a line, a residual `± 3 x²` beside it, and the signature `x²` of one
+        // parameter: the residual `simulated − measured` asks for the size `∓ 3`.
+        let n = 200;
+        let x: Vec<f64> = (0..n).map(|i| i as f64 / n as f64).collect();
+        let base = DMatrix::from_fn(n, 2, |i, j| if j == 0 { x[i] } else { 1.0 });
+        let signature = DMatrix::from_fn(n, 1, |i, _| x[i] * x[i]);
+        for (sign, negative) in [(1.0, true), (-1.0, false)] {
+            // The part of `sign · 3 x²` a line cannot explain.
+            let y = DMatrix::from_fn(n, 1, |i, _| sign * 3.0 * x[i] * x[i]);
+            let fit = base.clone().svd(true, true).solve(&y, 1e-12).unwrap();
+            let r = (y - &base * fit).as_slice().to_vec();
+            let projection = BaseProjection::new(&r, &base, &[n]).unwrap();
+            for kind in [
+                EffectKind::CurrentSensorLag,
+                EffectKind::QuadraticDrag,
+                EffectKind::BrushDrop,
+            ] {
+                assert_eq!(
+                    asks_for_negative_size(kind, &signature, &projection),
+                    negative,
+                    "{kind:?}, residual {sign} · 3 x²"
+                );
+            }
+            // A cogging torque's phase turns its sign: never one-sided.
+            assert!(!asks_for_negative_size(
+                EffectKind::CoggingTorque,
+                &signature,
+                &projection
+            ));
         }
     }
 }
