@@ -379,6 +379,10 @@ impl Simulator {
 
     /// Advances `x` from `t_from` to `t_to` in RK4 steps no longer than the plant allows.
     fn integrate<const N: usize>(&self, x: &mut State<N>, mode: &mut Mode, t_from: f64, t_to: f64) {
+        // A step or piecewise-constant voltage is split at its jumps (`run_sized`), so it holds
+        // one level over the whole interval: read once, not at every RK4 stage.
+        let held = matches!(self.input, Input::Step { .. } | Input::Piecewise { .. })
+            .then(|| self.input.volts_at(t_from));
         let mut t = t_from;
         while t < t_to {
             let mut h = self.max_step_s;
@@ -391,7 +395,7 @@ impl Simulator {
             // Spread the steps evenly over the remaining interval.
             let steps = (remaining / h).ceil().max(1.0);
             let h = remaining / steps;
-            self.step_with_events(x, mode, t, h, t_to);
+            self.step_with_events(x, mode, t, h, t_to, held);
             t = if steps <= 1.0 { t_to } else { t + h };
         }
     }
@@ -399,6 +403,7 @@ impl Simulator {
     ///
     /// `t_end` is the end of the interval being integrated: the input is taken as its value
     /// just before `t_end` there (a jump of E(t) at `t_end` belongs to the next interval).
+    /// `held`: the voltage over the whole interval when it holds one level.
     fn step_with_events<const N: usize>(
         &self,
         x: &mut State<N>,
@@ -406,11 +411,12 @@ impl Simulator {
         t: f64,
         h: f64,
         t_end: f64,
+        held: Option<f64>,
     ) {
         let mut t = t;
         let mut left = h;
         for _ in 0..MAX_EVENTS_PER_STEP {
-            let x1 = self.rk4(x, *mode, t, left, t_end);
+            let x1 = self.rk4(x, *mode, t, left, t_end, held);
             let switched = match *mode {
                 Mode::Stuck => self.breaks_away(&x1),
                 Mode::Moving(d) => d * x1[W_IDX] < 0.0,
@@ -423,7 +429,7 @@ impl Simulator {
             let (mut lo, mut hi) = (0.0_f64, 1.0_f64);
             for _ in 0..EVENT_BISECTIONS {
                 let mid = 0.5 * (lo + hi);
-                let xm = self.rk4(x, *mode, t, mid * left, t_end);
+                let xm = self.rk4(x, *mode, t, mid * left, t_end, held);
                 let happened = match *mode {
                     Mode::Stuck => self.breaks_away(&xm),
                     Mode::Moving(d) => d * xm[W_IDX] <= 0.0,
@@ -434,7 +440,7 @@ impl Simulator {
                     lo = mid;
                 }
             }
-            let mut xs = self.rk4(x, *mode, t, hi * left, t_end);
+            let mut xs = self.rk4(x, *mode, t, hi * left, t_end, held);
             xs[W_IDX] = 0.0;
             *mode = self.mode_at_rest(&xs);
             *x = xs;
@@ -444,7 +450,7 @@ impl Simulator {
                 return;
             }
         }
-        *x = self.rk4(x, *mode, t, left, t_end);
+        *x = self.rk4(x, *mode, t, left, t_end, held);
     }
 
     /// Torque acting on the rotor at rest apart from friction \[N·m\]: `k I − T_load(0, θ)`.
@@ -475,7 +481,8 @@ impl Simulator {
     /// One classical RK4 step of length `h` from `t`, inside an interval ending at `t_end`
     /// with no jump of the input before it: the stages take the input's left limit at
     /// `t_end` (evaluating a piecewise-constant input after its jump in the last stage would
-    /// apply the new level for a sixth of the step).
+    /// apply the new level for a sixth of the step); `held`, the level of an input that holds
+    /// one over the interval, read once by the caller.
     fn rk4<const N: usize>(
         &self,
         x: &State<N>,
@@ -483,14 +490,22 @@ impl Simulator {
         t: f64,
         h: f64,
         t_end: f64,
+        held: Option<f64>,
     ) -> State<N> {
         // t and t + h/2 lie before t_end; only the last stage can reach it.
-        let v_mid = self.input.volts_at(t + 0.5 * h);
-        let t4 = t + h;
-        let v_end = self
-            .input
-            .volts_at(if t4 >= t_end { t_end.next_down() } else { t4 });
-        let k1 = self.derivative(x, mode, self.input.volts_at(t));
+        let (v_start, v_mid, v_end) = match held {
+            Some(v) => (v, v, v),
+            None => {
+                let t4 = t + h;
+                (
+                    self.input.volts_at(t),
+                    self.input.volts_at(t + 0.5 * h),
+                    self.input
+                        .volts_at(if t4 >= t_end { t_end.next_down() } else { t4 }),
+                )
+            }
+        };
+        let k1 = self.derivative(x, mode, v_start);
         let k2 = self.derivative(&axpy(x, 0.5 * h, &k1), mode, v_mid);
         let k3 = self.derivative(&axpy(x, 0.5 * h, &k2), mode, v_mid);
         let k4 = self.derivative(&axpy(x, h, &k3), mode, v_end);
