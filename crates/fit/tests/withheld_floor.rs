@@ -65,10 +65,7 @@ fn a_refit_whose_stepped_start_the_sample_rate_cannot_simulate_starts_unstepped(
     // `Vb/I_knee` in series that makes L/R shorter than the records can simulate; the refit
     // was refused ("start parameters: a time constant … below the sample period") and the
     // verdict was `none`. From the start before the step it names the drop.
-    let case = benchmark_case(SEED, 100, 160).expect("a case of the benchmark");
-    let outcome = run_case(&case, &DiagnoseSettings::default());
-    assert_eq!(outcome.truth, ["brush_drop"]);
-    assert_eq!(outcome.verdict(), "brush_drop", "{outcome:?}");
+    assert_named(100, "brush_drop");
 }
 
 #[test]
@@ -77,8 +74,14 @@ fn a_drag_the_residual_asks_to_push_does_not_take_the_refit_of_a_cogging_torque(
     // drag's two-sided screening score (χ² 18) took one of the two refits from it, though its
     // linear step asked for a negative drag; the refit ran c to 6e-33 and the verdict was
     // `none`. Screened one-sided, the drag scores 0 and the cogging torque is refitted.
-    let case = benchmark_case(SEED, 19, 160).expect("a case of the benchmark");
+    assert_named(19, "cogging_torque");
+}
+
+/// Diagnoses case `index` of seed 1's 160, which holds `effect` alone, and checks that
+/// `effect` is named first.
+fn assert_named(index: usize, effect: &str) {
+    let case = benchmark_case(SEED, index, 160).expect("a case of the benchmark");
     let outcome = run_case(&case, &DiagnoseSettings::default());
-    assert_eq!(outcome.truth, ["cogging_torque"]);
-    assert_eq!(outcome.verdict(), "cogging_torque", "{outcome:?}");
+    assert_eq!(outcome.truth, [effect]);
+    assert_eq!(outcome.verdict(), effect, "{outcome:?}");
 }
