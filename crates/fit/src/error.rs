@@ -2,6 +2,11 @@ use std::fmt;
 
 use motor_model::ModelError;
 
+/// The series a [`FitError`] about a fit's start motor parameters names: a start no motor can
+/// have, or one the records' sample rate cannot simulate (the diagnosis refits a candidate
+/// from its unstepped start on such an error).
+pub(crate) const START_SERIES: &str = "start parameters";
+
 /// Every way an identification can refuse its input.
 ///
 /// A fit that runs but does not converge is *not* an error: it is a result whose

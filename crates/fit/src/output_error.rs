@@ -22,7 +22,7 @@ use motor_model::{central_difference, steady_state, Effects, Input, MotorParams,
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
-use crate::error::FitError;
+use crate::error::{FitError, START_SERIES};
 use crate::full_model::{
     noise_floor, noise_of_second_differences, noise_std, quality_from_sums,
     squared_second_difference, Channel, ChannelQuality, FittedChannel, FullFit, WeightedProblem,
@@ -64,8 +64,6 @@ const STEP_MARGIN: f64 = 0.5;
 // A record sampled fifty times slower than τe took minutes a fit at 1000 steps a sample, for
 // an L that its current, settled at every sample, cannot show.
 const MAX_STEPS_PER_SAMPLE: f64 = 200.0;
-/// What a [`FitError::BadData`] of a start the records' sample rate cannot simulate names.
-pub(crate) const START_SERIES: &str = "start parameters";
 /// Speed bound of the simulations over the largest measured |speed| (room for the fitted
 /// motor to run faster than the records while the step stays fixed).
 const SPEED_BOUND_MARGIN: f64 = 1.5;

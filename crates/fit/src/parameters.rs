@@ -12,7 +12,7 @@
 use motor_model::{Domain, EffectKind, Effects, MotorParams, ParamSpec};
 use nalgebra::DMatrix;
 
-use crate::error::FitError;
+use crate::error::{FitError, START_SERIES};
 use crate::full_model::{PARAM_NAMES, PARAM_UNITS};
 use crate::stats::from_covariance;
 
@@ -98,12 +98,10 @@ impl Parameters {
     /// θ of `motor` with the fitted values of `effects` (the same effects as these
     /// parameters'), refusing values the transforms cannot carry.
     pub fn encode(&self, motor: &MotorParams, effects: &Effects) -> Result<Vec<f64>, FitError> {
-        motor
-            .validate()
-            .map_err(FitError::model("start parameters"))?;
+        motor.validate().map_err(FitError::model(START_SERIES))?;
         if motor.ts_nm <= 0.0 {
             return Err(FitError::BadData {
-                series: "start parameters".into(),
+                series: START_SERIES.into(),
                 reason: "Ts = 0: the fit works on ln Ts and needs a positive start".into(),
             });
         }

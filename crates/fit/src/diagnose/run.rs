@@ -53,12 +53,11 @@ use crate::diagnose::localise::{
 };
 use crate::diagnose::screen::{BaseProjection, Screening, CORRELATION_LAGS};
 use crate::diagnose::verdict::{rank_candidates, CandidateScore, Verdict, VerdictSettings};
-use crate::error::FitError;
+use crate::error::{FitError, START_SERIES};
 use crate::full_model::{Channel, FittedChannel, FullFit, PARAM_NAMES};
 use crate::lm::LmSettings;
 use crate::output_error::{
     fit_output_error, output_error_sensitivity, predict_with_step_factor, ExcitedRecord,
-    START_SERIES,
 };
 use crate::parameters::EffectEstimate;
 
@@ -1602,9 +1601,19 @@ fn asks_for_negative_size(
     );
     one_sided
         && signatures.ncols() == 1
-        && projection
-            .step(signatures)
-            .is_some_and(|step| step[0] < 0.0)
+        && size_step(signatures, projection).is_some_and(|d| d < 0.0)
+}
+
+/// The screening's linear step ([`BaseProjection::step`]) of an effect's first parameter, its
+/// size, on that parameter's signature column alone; `None` without columns or when that
+/// column is not testable.
+fn size_step(signatures: &DMatrix<f64>, projection: &BaseProjection) -> Option<f64> {
+    if signatures.ncols() == 0 {
+        return None;
+    }
+    projection
+        .step(&signatures.columns(0, 1).into_owned())
+        .map(|step| step[0])
 }
 
 /// Largest factor by which [`stepped_start`] grows or shrinks an effect's size \[-\]: the
@@ -1638,13 +1647,7 @@ fn stepped_start(
         let m = 1.0 + delta;
         (m.is_finite() && m > 0.0).then(|| m.clamp(1.0 / SIZE_STEP_LIMIT, SIZE_STEP_LIMIT))
     };
-    let size_factor = || {
-        if signatures.ncols() == 0 {
-            return None;
-        }
-        let step = projection.step(&signatures.columns(0, 1).into_owned())?;
-        grow(step[0])
-    };
+    let size_factor = || size_step(signatures, projection).and_then(grow);
     match effect {
         Effect::CoggingTorque(c) => {
             let Some(step) = projection.step(signatures) else {
