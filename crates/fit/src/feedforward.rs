@@ -1094,7 +1094,11 @@ pub fn identify_feedforward(
                 theta.push(0.0); // the viscous share of kV at its prior mean
             }
             let fit = fit_stages(&mut problem, &theta, settings.lm, &mut iterations)?;
-            if !fit.termination.converged() {
+            // A fit that drove kS to 0 (its logarithm far below the start's) leaves kS no
+            // interval, so it is no result; the next starts are tried instead (with R and k
+            // given, a PRBS of the paper's motor read by an encoder converged there from every
+            // start about the sample period, and fitted kS from those about τm).
+            if !fit.termination.converged() || fit.params[0] < ks0.ln() - KS_COLLAPSE_LN {
                 continue;
             }
             // Starts compared at the records' own noise levels (the second stage's weights
