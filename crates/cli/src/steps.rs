@@ -430,8 +430,9 @@ impl LoadedExcited {
     }
 
     /// The voltage-and-speed identification's view of the record (its current, if any, is
-    /// not used).
-    pub fn speed_record(&self) -> SpeedRecord<'_> {
+    /// not used), starting at rest or in steady motion as `at_rest` says
+    /// ([`SpeedRecord::at_rest`]).
+    pub fn speed_record(&self, at_rest: Option<bool>) -> SpeedRecord<'_> {
         SpeedRecord {
             input: &self.input,
             dt: self.dt,
@@ -439,6 +440,7 @@ impl LoadedExcited {
             position: self.record.position.as_deref(),
             exclude: self.exclude_speed.as_deref(),
             priors: &self.priors,
+            at_rest,
         }
     }
 }
@@ -607,13 +609,17 @@ pub fn fit_excited_from(
 
 /// kS, kV, kA (and τe where the records show it) of `loaded` from voltage and speed alone
 /// ([`fit::identify_feedforward`]), with the back-EMF constant `torque_constant` \[N·m/A\]
-/// where it is given; errors name `label`.
+/// where it is given, each record starting as `initial` says (`None`: as its speed shows;
+/// `steady` and `free` alike: in steady motion at a fitted speed, the only motion the model
+/// without current starts from); errors name `label`.
 pub fn fit_voltage_speed(
     loaded: &[LoadedExcited],
     torque_constant: Option<f64>,
+    initial: Option<fit::InitialState>,
     label: &str,
 ) -> Result<FeedforwardFit> {
-    let records: Vec<SpeedRecord> = loaded.iter().map(LoadedExcited::speed_record).collect();
+    let at_rest = initial.map(|s| s == fit::InitialState::Rest);
+    let records: Vec<SpeedRecord> = loaded.iter().map(|l| l.speed_record(at_rest)).collect();
     let settings = FeedforwardSettings {
         torque_constant,
         ..FeedforwardSettings::default()

@@ -216,6 +216,41 @@ fn a_prbs_without_current_and_an_encoder_gives_the_constants() {
     assert_voltage_speed_truth("PRBS, encoder", &[&prbs(&dir, false)]);
 }
 
+/// A PRBS from its first sample (no samples at 0 V before it): the servo is at rest at that
+/// sample and, at 2 kHz, already turns a few samples later. The mean of the first five speeds
+/// said "running", and the fitted start (−14 rad/s) drove kS to 0 and no interval; the speed
+/// at the first sample now says rest. `--initial-state steady` still asks for the fitted start.
+#[test]
+fn a_prbs_from_the_first_sample_starts_at_rest() {
+    let dir = scratch("kinds_prbs_first_sample");
+    let input = [
+        "--prbs",
+        "12,0.02,7",
+        "--duration",
+        "0.5",
+        "--rate",
+        "2000",
+        "--seed",
+        "1010",
+    ];
+    let path = servo_record(&dir, "prbs0", &input, true);
+    assert_voltage_speed_truth("PRBS from the first sample, tachometer", &[&path]);
+    let text = stdout(&motorid(&["identify", "--record", path.to_str().unwrap()]));
+    assert!(!text.contains("starts running"), "{text}");
+    let steady = motorid(&[
+        "identify",
+        "--record",
+        path.to_str().unwrap(),
+        "--initial-state",
+        "steady",
+    ]);
+    assert!(
+        stdout(&steady).contains("starts running"),
+        "{}",
+        stdout(&steady)
+    );
+}
+
 #[test]
 fn a_step_from_one_level_to_another_of_a_running_motor_gives_the_constants() {
     // 5 V from t = 0, 15 V from 0.25 s; the record cut at 0.2 s, where the motor runs steadily

@@ -102,6 +102,10 @@ pub struct SpeedRecord<'a> {
     /// [`crate::voltage_levels`], one per level), or empty: the fit then moves the levels and
     /// their instants within these priors and its intervals carry what remains unknown.
     pub priors: &'a [LevelPrior],
+    /// How the record starts: `Some(true)` at rest, `Some(false)` in steady motion at a
+    /// fitted speed, `None` as its speed shows (at rest when the first sample, or the mean of
+    /// the first five, is within three noise levels of zero).
+    pub at_rest: Option<bool>,
 }
 
 /// Result of [`identify_feedforward`].
@@ -858,11 +862,15 @@ pub fn identify_feedforward(
             .collect();
         let data: Vec<f64> = keep.iter().map(|&i| full[i]).collect();
         let sigma = noise_std(&data);
-        // At rest at the first samples: their mean within the noise of zero (and an encoder
-        // that has not moved).
+        // At rest: the speed at the first sample within the noise of zero, or the mean of the
+        // first five (and an encoder that has not moved). The first sample alone decides for a
+        // motor that a voltage applied at that sample speeds up within five samples (a servo's
+        // PRBS at 2 kHz: its head mean said "running", and the fitted start drove kS to 0).
         let head = &full[..n.min(5)];
         let head_mean = head.iter().sum::<f64>() / head.len() as f64;
-        let at_rest = head_mean.abs() <= 3.0 * sigma;
+        let at_rest = rec
+            .at_rest
+            .unwrap_or(full[0].abs() <= 3.0 * sigma || head_mean.abs() <= 3.0 * sigma);
         let free_start = if at_rest {
             None
         } else {

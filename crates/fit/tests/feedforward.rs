@@ -63,6 +63,7 @@ fn fit(records: &[Record]) -> fit::FeedforwardFit {
             position: r.position.as_deref(),
             exclude: None,
             priors: &r.priors,
+            at_rest: None,
         })
         .collect();
     identify_feedforward(&speed_records, FeedforwardSettings::default()).unwrap()

@@ -236,6 +236,7 @@ proptest! {
             position: (off == Off::Angle).then_some(&angle[..]),
             exclude: Some(if off == Off::Mask { &mask[..] } else { &full_mask[..] }),
             priors: &[],
+            at_rest: None,
         };
         prop_assert!(identify_feedforward(&[speed_record], FeedforwardSettings::default()).is_err());
 

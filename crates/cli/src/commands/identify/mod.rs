@@ -865,7 +865,7 @@ fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Resu
         // A given k fixes the back-EMF's share of kV, which τe couples to the speed: without
         // it that share is a nuisance with a uniform prior, and kA's interval is 5–20 times
         // wider.
-        let fit = fit_voltage_speed(&loaded, a.torque_constant, &all)?;
+        let fit = fit_voltage_speed(&loaded, a.torque_constant, a.initial_state, &all)?;
         return kinds::report(a, &kind, &fit, &files);
     }
     if a.resistance.is_some() || a.torque_constant.is_some() {
