@@ -518,6 +518,52 @@ const FIXTURE_CASES: &[FixtureCase] = &[
     },
 ];
 
+/// The small servo's records of the tests above (staircase, PRBS, a running step), for the
+/// heavy coverage test alone.
+const SERVO_CASES: &[FixtureCase] = &[
+    FixtureCase {
+        motor: "small_servo",
+        what: "staircase",
+        input: &[
+            "--levels",
+            "0.05:2,0.2:6,0.35:3,0.5:9",
+            "--duration",
+            "0.7",
+            "--rate",
+            "2000",
+        ],
+        cut_s: 0.0,
+    },
+    FixtureCase {
+        motor: "small_servo",
+        what: "PRBS",
+        input: &[
+            "--prbs",
+            "8,0.04,1",
+            "--step-at",
+            "0.05",
+            "--duration",
+            "0.6",
+            "--rate",
+            "2000",
+        ],
+        cut_s: 0.0,
+    },
+    FixtureCase {
+        motor: "small_servo",
+        what: "5 V → 15 V running",
+        input: &[
+            "--levels",
+            "0:5,0.25:15",
+            "--duration",
+            "0.5",
+            "--rate",
+            "4000",
+        ],
+        cut_s: 0.2,
+    },
+];
+
 /// One interval of a fixture run: what it is, `[lo, hi]` and the truth.
 struct FixtureInterval {
     what: String,
@@ -677,8 +723,11 @@ fn miss_bound(n: usize) -> usize {
     n
 }
 
-/// Heavy (`MOTORID_HEAVY=1`): the coverage of every interval of [`FIXTURE_CASES`] over many
-/// noise seeds (`MOTORID_SEEDS`, default 100, from `MOTORID_FIRST_SEED`, default 1001). Each
+/// Heavy (`MOTORID_HEAVY=1`): the coverage of every interval of [`FIXTURE_CASES`] and
+/// [`SERVO_CASES`] over many noise seeds (`MOTORID_SEEDS`, default 100, from
+/// `MOTORID_FIRST_SEED`, default 1001). An encoder's angle carries no noise, so its records
+/// change little from seed to seed (only the voltage's noise does): their counts are nearly
+/// one draw, the tachometer's are many. Each
 /// interval (case, sensor, with or without R and k, parameter) misses its truth at most
 /// [`miss_bound`] times (a probability below 0.1 % at 95 % coverage), and runs `identify`
 /// refuses are at most 5 %. Prints the misses of every interval and the refusals.
@@ -706,7 +755,7 @@ fn fixture_coverage_over_many_seeds() {
                 if seed >= first + seeds {
                     break;
                 }
-                for case in FIXTURE_CASES {
+                for case in FIXTURE_CASES.iter().chain(SERVO_CASES) {
                     for tacho in [false, true] {
                         let found = fixture_intervals(&dir, case, tacho, Some(seed));
                         results.lock().unwrap().push(found);

@@ -33,7 +33,9 @@ use crate::lm::{
 };
 use crate::mechanical::{identify_inverse_model_pooled, AxisRecord, InverseModelSettings};
 use crate::pipeline::ParameterEstimate;
-use crate::stats::{equal_runs, newey_west_run_covariance, sandwich_uncertainty, Uncertainty};
+use crate::stats::{
+    at_least, equal_runs, newey_west_run_covariance, sandwich_uncertainty, Uncertainty,
+};
 
 /// The voltage-to-speed constants of a motor (module docs).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -114,8 +116,9 @@ pub struct FeedforwardFit {
     /// The fitted constants.
     pub params: FeedforwardParams,
     /// 95 % intervals of kS, kV, kA (same order and units as the fields of
-    /// [`FeedforwardParams`]; Newey–West sandwich, delta method from the logarithms); `None`
-    /// when they cannot be computed.
+    /// [`FeedforwardParams`]; Newey–West sandwich, each standard error at least the
+    /// model-based one, delta method from the logarithms); `None` when they cannot be
+    /// computed.
     pub ci95: Option<[[f64; 2]; 3]>,
     /// What the records said of the electrical time constant.
     pub tau_e: TauE,
@@ -1268,7 +1271,10 @@ fn intervals_of(
 }
 
 /// The sandwich uncertainty of every fitted parameter (in the fit's own coordinates: the
-/// logarithms of the constants and of τe, then the initial speeds and the nuisances).
+/// logarithms of the constants and of τe, then the initial speeds and the nuisances), each
+/// standard error at least the model-based one ([`at_least`]: the small servo's staircase
+/// with a tachometer, R and k given, missed kA in 30 of 200 noise seeds with the Newey–West
+/// one alone, 10 with the floor).
 fn fit_uncertainty(problem: &FfProblem, report: &LmReport) -> Option<Uncertainty> {
     let (mut r, jac) = problem.jacobian(&report.params)?;
     // A prior's row enters the score's covariance with its expected square, 1 (its variance),
@@ -1285,7 +1291,17 @@ fn fit_uncertainty(problem: &FfProblem, report: &LmReport) -> Option<Uncertainty
         .collect();
     runs.extend(std::iter::repeat_n(1, priors));
     let score = newey_west_run_covariance(&r, &jac, &problem.series(), &runs)?;
-    sandwich_uncertainty(&report.normal, &score)
+    let hac = sandwich_uncertainty(&report.normal, &score)?;
+    // The model-based score covariance, `s² J_dᵀJ_d` of the data rows (`s²` their mean square
+    // over n − p) and the priors' own: a floor under the Newey–West one ([`at_least`]).
+    let data = n - priors;
+    let dof = data.checked_sub(jac.ncols()).filter(|&d| d > 0)?;
+    let s2 = r[..data].iter().map(|v| v * v).sum::<f64>() / dof as f64;
+    let jd = jac.rows(0, data);
+    let jp = jac.rows(data, priors);
+    let model = jd.transpose() * jd * s2 + jp.transpose() * jp;
+    let based = sandwich_uncertainty(&report.normal, &model)?;
+    at_least(hac, &based)
 }
 
 /// [`TauE::Traded`] of `fit` (with τe, no torque constant given, kA undetermined): refitted
