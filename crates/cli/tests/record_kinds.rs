@@ -155,15 +155,7 @@ fn servo_record(
 
 /// A staircase from rest (2, 6, 3, 9 V), 0.7 s at 2 kHz.
 fn staircase(dir: &std::path::Path, tacho: bool) -> std::path::PathBuf {
-    let input = [
-        "--levels",
-        "0.05:2,0.2:6,0.35:3,0.5:9",
-        "--duration",
-        "0.7",
-        "--rate",
-        "2000",
-    ];
-    servo_record(dir, "stairs", &input, tacho)
+    servo_record(dir, "stairs", SERVO_CASES[0].input, tacho)
 }
 
 #[test]
@@ -191,17 +183,7 @@ fn a_staircase_without_current_gives_ks_kv_ka_and_j_f_ts_with_r_and_k() {
 
 /// A PRBS of ±8 V, 40 ms bits, 0.6 s at 2 kHz.
 fn prbs(dir: &std::path::Path, tacho: bool) -> std::path::PathBuf {
-    let input = [
-        "--prbs",
-        "8,0.04,1",
-        "--step-at",
-        "0.05",
-        "--duration",
-        "0.6",
-        "--rate",
-        "2000",
-    ];
-    servo_record(dir, "prbs", &input, tacho)
+    servo_record(dir, "prbs", SERVO_CASES[1].input, tacho)
 }
 
 #[test]
@@ -256,15 +238,8 @@ fn a_step_from_one_level_to_another_of_a_running_motor_gives_the_constants() {
     // 5 V from t = 0, 15 V from 0.25 s; the record cut at 0.2 s, where the motor runs steadily
     // at 5 V: it starts running.
     let dir = scratch("kinds_level_to_level");
-    let input = [
-        "--levels",
-        "0:5,0.25:15",
-        "--duration",
-        "0.5",
-        "--rate",
-        "4000",
-    ];
-    let path = record_without_current(&dir, "levels", SERVO, &input, false, 0.2);
+    let case = &SERVO_CASES[2];
+    let path = record_without_current(&dir, "levels", SERVO, case.input, false, case.cut_s);
     assert_voltage_speed_truth("5 V → 15 V, running at the first sample", &[&path]);
     let report = identify(&[&path], &[]);
     let w0 = report["initial_speed"][0]["value"].as_f64().unwrap();
@@ -518,8 +493,8 @@ const FIXTURE_CASES: &[FixtureCase] = &[
     },
 ];
 
-/// The small servo's records of the tests above (staircase, PRBS, a running step), for the
-/// heavy coverage test alone.
+/// The small servo's records (a staircase, a PRBS, a step from 5 V to 15 V cut where the motor
+/// runs steadily at 5 V): the tests' own, and the heavy coverage test's.
 const SERVO_CASES: &[FixtureCase] = &[
     FixtureCase {
         motor: "small_servo",
