@@ -271,6 +271,11 @@ const MAX_CHECKS: usize = 64;
 /// How far \[ln\] below its start the reduced fit may take kS before the τe stage restarts
 /// it from the start (a factor of 1000).
 const KS_COLLAPSE_LN: f64 = 6.907755278982137;
+/// Whether a fit took kS, `ln_ks` its logarithm, [`KS_COLLAPSE_LN`] below the start's `ks0`
+/// \[V\]: driven to 0, where its gradient in the logarithm vanishes and it has no interval.
+fn ks_collapsed(ln_ks: f64, ks0: f64) -> bool {
+    ln_ks < ks0.ln() - KS_COLLAPSE_LN
+}
 /// Decimation of the start's inverse model.
 const START_DECIMATION: usize = 5;
 /// Cut-offs of the start's position filter, as fractions of the sample rate, tried in turn.
@@ -1089,7 +1094,7 @@ pub fn identify_feedforward(
             // Where τe's lag at the reversals looks like a smaller kS, the reduced fit can
             // drive kS to 0 (its logarithm far below the start's): kS restarts there from the
             // start's value, or its gradient in the logarithm vanishes.
-            if theta[0] < ks0.ln() - KS_COLLAPSE_LN {
+            if ks_collapsed(theta[0], ks0) {
                 theta[0] = ks0.ln();
             }
             theta.push(
@@ -1109,7 +1114,7 @@ pub fn identify_feedforward(
             // interval, so it is no result; the next starts are tried instead (with R and k
             // given, a PRBS of the paper's motor read by an encoder converged there from every
             // start about the sample period, and fitted kS from those about τm).
-            if !fit.termination.converged() || fit.params[0] < ks0.ln() - KS_COLLAPSE_LN {
+            if !fit.termination.converged() || ks_collapsed(fit.params[0], ks0) {
                 continue;
             }
             // Starts compared at the records' own noise levels (the second stage's weights
@@ -1327,7 +1332,7 @@ fn traded(
     let mut theta: Vec<f64> = fit.params[..fit.params.len() - 1].to_vec();
     theta[2] = lead.ln();
     theta[3] = (ka * tau_e / lead).ln();
-    if theta[0] < ks0.ln() - KS_COLLAPSE_LN {
+    if ks_collapsed(theta[0], ks0) {
         theta[0] = ks0.ln();
     }
     problem.share_at_zero = true;
