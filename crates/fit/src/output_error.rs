@@ -1429,6 +1429,9 @@ impl NuisanceProblem for OeProblem {
     }
 }
 
+/// Samples per row of the equation-error start's torque equation (2b), at most \[-\].
+const START_DECIMATION: usize = 5;
+
 /// RK4 steps of [`equation_error_start`]'s simulations, as a multiple of the simulator's
 /// default ([`Simulator::with_step_factor`]).
 const START_STEP_FACTOR: f64 = 8.0;
@@ -1620,11 +1623,21 @@ fn equation_error_estimate(
     let dt_max = per_record.iter().map(|(dt, _)| *dt).fold(0.0_f64, f64::max);
     // Accelerations are second differences of a quantised angle: filter harder than the
     // electrical side and average by decimation, or the noise in the acceleration regressor
-    // biases J towards zero.
+    // biases J towards zero. Every START_DECIMATION-th sample, or as many as the shortest
+    // record leaves twenty rows at (a 0.1 s step at 1 kHz has 101 samples).
+    let shortest = per_record
+        .iter()
+        .map(|(_, position)| position.len())
+        .min()
+        .unwrap_or(0);
+    let decimation = (1..=START_DECIMATION)
+        .rev()
+        .find(|&d| shortest >= crate::mechanical::min_samples(d))
+        .unwrap_or(START_DECIMATION);
     let settings = InverseModelSettings {
         position_cutoff_hz: 0.2 * fraction / dt_max,
         position_filter_order: 4,
-        decimation: 5,
+        decimation,
         // Eq. (2b) has no offset; with one, a record that never reverses cannot tell it from
         // Ts (a 40 V step gave Ts = 2443 N·m against an offset of −2443 N·m).
         fit_offset: false,

@@ -115,3 +115,37 @@ fn exact_sine_and_prbs_records_give_back_the_motor() {
         );
     }
 }
+
+/// A step pair of 101 samples each (0.1 s at 1 kHz, a small servo) gives an equation-error
+/// start: the torque equation reads every 4th sample instead of every 5th, where the latter
+/// would leave fewer than twenty rows and the start was refused ("at least 110 are needed").
+#[test]
+fn a_step_pair_of_a_hundred_samples_gives_a_start() {
+    let truth = MotorParams::new(2.0, 1e-3, 0.05, 1e-5, 5e-6, 1e-3).unwrap();
+    let inputs = [
+        Input::step(12.0, 0.0015).unwrap(),
+        Input::step(2.0, 0.0015).unwrap(),
+    ];
+    let recs: Vec<(Record, Input)> = inputs
+        .iter()
+        .enumerate()
+        .map(|(j, input)| {
+            let trace = Simulator::new(truth, Effects::none(), input.clone())
+                .unwrap()
+                .run(0.1, 1000.0)
+                .unwrap();
+            let rec = logger(&trace, 3 + j as u64);
+            let measured = voltage_input(&rec.t, &rec.voltage).unwrap();
+            (rec, measured)
+        })
+        .collect();
+    assert_eq!(recs[0].0.t.len(), 101);
+    let records: Vec<ExcitedRecord<'_>> = recs.iter().map(|(r, i)| excited(r, i)).collect();
+    let start = equation_error_start(&records).expect("a start from 101 samples");
+    // A start, not a fit: R and k within 20 % (they come from Eq. (2a) on every sample).
+    assert!((start.r_ohm / truth.r_ohm - 1.0).abs() < 0.2, "{start:?}");
+    assert!(
+        (start.k_nm_per_a / truth.k_nm_per_a - 1.0).abs() < 0.2,
+        "{start:?}"
+    );
+}
