@@ -9,15 +9,17 @@
 //!
 //! With CASE, only that case is diagnosed and every candidate of every stage printed.
 //!
-//! With `WITHHELD_SEEN=1` each case line also gives its effects' visibility after the nominal
-//! refit (`fit::diagnose::benchmark::visibility_after_refit`), and the summary the top-1
-//! accuracy of the effect cases by that visibility.
+//! The cases are `fit::diagnose::benchmark::calibrated_case`'s: each effect sized on the gap
+//! the nominal model cannot absorb (`nominal_gap`). With `WITHHELD_PLAIN=1` they are
+//! `motor_model::withheld::benchmark_case`'s instead, sized against the true nominal motor.
+//! With `WITHHELD_SEEN=1` each case line also gives that gap, and the summary the top-1
+//! accuracy of the effect cases by it.
 //!
 //! (default seed 1, 160 cases: 20 `none`, 20 with two effects, 120 with one; heavy — minutes
 //! per ten cases on two cores). One line per case as it finishes, the summary at the end.
 
 use fit::diagnose::benchmark::{
-    diagnose_case, run_case, visibility_after_refit, CaseOutcome, Summary,
+    calibrated_case, diagnose_case, nominal_gap, run_case, CaseOutcome, Summary,
 };
 use fit::diagnose::DiagnoseSettings;
 use motor_model::withheld::{benchmark_case, simulate_plant, visibility};
@@ -51,8 +53,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         settings.refits = settings.candidates.len();
         settings.screening_alpha = 1.0;
     }
+    let plain = std::env::var_os("WITHHELD_PLAIN").is_some();
+    let case_of = |i: usize| {
+        if plain {
+            benchmark_case(seed, i, n)
+        } else {
+            calibrated_case(seed, i, n, &settings)
+        }
+    };
     if let Some(index) = args.next().map(|s| s.parse::<usize>()).transpose()? {
-        let case = benchmark_case(seed, index, n)?;
+        let case = case_of(index)?;
         println!("case {index}: truth {:?}", case.truth());
         if std::env::var_os("WITHHELD_VERBOSE").is_some() {
             println!("{}", serde_json::to_string(&case)?);
@@ -161,7 +171,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if std::env::var_os("WITHHELD_LIST").is_some() {
         // The cases' truths and forms only, without diagnosing them.
         for i in 0..n {
-            let case = benchmark_case(seed, i, n)?;
+            let case = case_of(i)?;
             let forms: Vec<String> = case.effects.iter().map(|e| e.effect.form_label()).collect();
             println!(
                 "{i:>4}  {:<45} {:?} visibility {:.1}",
@@ -172,21 +182,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         return Ok(());
     }
-    // With WITHHELD_SEEN, each case's visibility after the nominal refit too, and the
-    // accuracy by that visibility at the end.
+    // With WITHHELD_SEEN, each case's gap after the nominal refit too, and the accuracy by
+    // that gap at the end.
     let seen_too = std::env::var_os("WITHHELD_SEEN").is_some();
-    let mut seen: Vec<Option<(f64, f64)>> = Vec::with_capacity(n);
+    let mut seen: Vec<Option<f64>> = Vec::with_capacity(n);
     let mut outcomes: Vec<CaseOutcome> = Vec::with_capacity(n);
     for i in 0..n {
-        let case = benchmark_case(seed, i, n)?;
+        let case = case_of(i)?;
         let o = run_case(&case, &settings);
         let after = seen_too
-            .then(|| visibility_after_refit(&case, &settings).ok())
+            .then(|| {
+                let traces = case.traces_with(&case.plant_effects()).ok()?;
+                nominal_gap(&case, &traces, &settings)
+            })
             .flatten();
         seen.push(after);
-        let after_text = after.map_or(String::new(), |(train, all)| {
+        let after_text = after.map_or(String::new(), |gap| {
             format!(
-                "  visibility {:.1}, after the nominal refit {train:.1} (training) {all:.1} (all)",
+                "  visibility {:.1}, gap after the nominal refit {gap:.1}",
                 case.visibility
             )
         });
@@ -214,7 +227,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         for at_least in [0.0, 1.0, 2.0, 4.0] {
             let (mut right, mut cases) = (0, 0);
             for (o, v) in outcomes.iter().zip(&seen) {
-                if o.truth == ["none"] || !v.is_some_and(|(train, _)| train >= at_least) {
+                if o.truth == ["none"] || !v.is_some_and(|gap| gap >= at_least) {
                     continue;
                 }
                 cases += 1;

@@ -497,17 +497,18 @@ fn train_statistic(
 const JUMP_SEARCH_ROUNDS: usize = 12;
 
 /// Record `k`'s piecewise-constant voltage with every jump moved, one after the other, to the
-/// instant within the sample period before its first sample at which `motor` fits the record
-/// best (weighted squared error of its channels, `sigmas` as in [`channel_scales`]), by a
+/// instant within the sample period before its first sample at which `motor` with `effects`
+/// fits the record best (weighted squared error of its channels, `sigmas` as in [`channel_scales`]), by a
 /// golden-section search of [`JUMP_SEARCH_ROUNDS`] rounds per jump. A logger's clock is not
 /// tied to the step: the voltage column tells only between which two samples a jump fell, and
 /// a model whose step comes up to a period late leaves a residual at every jump that an effect
 /// acting there (a sensor lag, a saturating inductance) would be named for. `None` when the
 /// voltage is not piecewise constant or nothing could be simulated.
-fn locate_jumps(
+pub(crate) fn locate_jumps(
     k: usize,
     record: &ExcitedRecord<'_>,
     motor: &MotorParams,
+    effects: &Effects,
     sigmas: &[(usize, Channel, f64)],
     step_factor: f64,
 ) -> Option<Input> {
@@ -525,7 +526,7 @@ fn locate_jumps(
             input: &input,
             ..*record
         };
-        let fitted = predict_with_step_factor(&[r], motor, &Effects::none(), step_factor).ok()?;
+        let fitted = predict_with_step_factor(&[r], motor, effects, step_factor).ok()?;
         let mut sse = 0.0;
         for ch in &fitted {
             let sigma = sigmas
@@ -860,7 +861,7 @@ fn with_jump_columns(
 }
 
 /// `records` with record `k`'s input replaced by `inputs[k]` where that is given.
-fn with_inputs<'a>(
+pub(crate) fn with_inputs<'a>(
     records: &[ExcitedRecord<'a>],
     inputs: &'a [Option<Input>],
 ) -> Vec<ExcitedRecord<'a>> {
@@ -1300,7 +1301,16 @@ pub fn diagnose(
     let located: Vec<Option<Input>> = all
         .iter()
         .enumerate()
-        .map(|(k, r)| locate_jumps(k, r, &nominal.params, &sigmas, settings.step_factor))
+        .map(|(k, r)| {
+            locate_jumps(
+                k,
+                r,
+                &nominal.params,
+                &Effects::none(),
+                &sigmas,
+                settings.step_factor,
+            )
+        })
         .collect();
     let train: Vec<ExcitedRecord<'_>> = with_inputs(&train, &located);
     let all: Vec<ExcitedRecord<'_>> = with_inputs(&all, &located);

@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::chain::{ChannelRanges, MeasurementSpec, NoiseFloors, NoiseSpec, SpeedSensor};
-use super::forms::{withheld_effect_names, Form, PlantEffect};
+use super::forms::{withheld_effect_names, Form, PlantEffect, LUGRE_PRESLIDING_RAD};
 use super::plant::simulate_plant;
 use crate::derived::Derived;
 use crate::error::ModelError;
@@ -224,8 +224,35 @@ pub fn benchmark_cases(seed: u64, n: usize) -> Result<Vec<CaseSpec>, ModelError>
     let mix = case_mix(seed, n);
     mix.iter()
         .enumerate()
-        .map(|(index, effects)| build_case(seed, index, effects))
+        .map(|(index, effects)| build_case(seed, index, effects, None))
         .collect()
+}
+
+/// How visible an effect stays, in noise floors, once the records' noise-free `traces` (one
+/// per record of the case, with the effect) have been explained by the best nominal model that
+/// can be found: a measure the caller supplies (this crate fits nothing), `None` when it
+/// cannot be computed (the effect is then measured against the true motor, [`visibility`]).
+pub type GapMeasure<'a> = &'a dyn Fn(&CaseSpec, &[Trace]) -> Option<f64>;
+
+/// Case `index` of the `n` cases of `seed`, as [`benchmark_case`] draws it, with every
+/// effect's magnitude calibrated on `gap` instead of on [`visibility`]: the effect is sized
+/// so that what the nominal model cannot absorb (by shifting its six parameters and each
+/// voltage jump within its sample period) reaches the drawn target. An effect the nominal
+/// model absorbs whole is no gap between model and records: SPEC section 5 calls such records
+/// `none`. The stored visibilities are `gap`'s.
+pub fn benchmark_case_with_gap(
+    seed: u64,
+    index: usize,
+    n: usize,
+    gap: GapMeasure<'_>,
+) -> Result<CaseSpec, ModelError> {
+    let mix = case_mix(seed, n);
+    let effects = mix.get(index).ok_or_else(|| ModelError::InvalidSetting {
+        name: "case index".into(),
+        value: index as f64,
+        expected: "an index below the number of cases",
+    })?;
+    build_case(seed, index, effects, Some(gap))
 }
 
 /// Case `index` of the `n` cases of `seed`, built alone (so that a caller can build cases in
@@ -237,7 +264,7 @@ pub fn benchmark_case(seed: u64, index: usize, n: usize) -> Result<CaseSpec, Mod
         value: index as f64,
         expected: "an index below the number of cases",
     })?;
-    build_case(seed, index, effects)
+    build_case(seed, index, effects, None)
 }
 
 /// The operating points an effect's first guess is sized from.
@@ -311,6 +338,7 @@ fn build_case(
     seed: u64,
     index: usize,
     wanted: &[(&'static str, Form)],
+    gap: Option<GapMeasure<'_>>,
 ) -> Result<CaseSpec, ModelError> {
     let case_seed =
         NoiseRng::new(seed ^ (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)).next_u64();
@@ -429,11 +457,18 @@ fn build_case(
         reversal_s: 6.0 * half_s,
         total_s: case.records.iter().map(|r| r.duration_s).sum(),
     };
+    // How visible `effects` are: against the true motor, or what `gap` says is left.
+    let seen_of = |case: &CaseSpec, effects: &[PlantEffect]| -> Result<f64, ModelError> {
+        let traces = case.traces_with(effects)?;
+        let plain = || visibility(&traces, &nominal, &floors);
+        Ok(gap.and_then(|g| g(case, &traces)).unwrap_or_else(plain))
+    };
+    let mut calibrated = Vec::with_capacity(wanted.len());
     for &(name, form) in wanted {
         let first = first_guess(name, form, &op, &mut d)?;
         let target = d.log_uniform(TARGET_VISIBILITY.0, TARGET_VISIBILITY.1);
         let mut effect = limit(first, &op);
-        let mut seen = visibility(&case.traces_with(&[effect])?, &nominal, &floors);
+        let mut seen = seen_of(&case, &[effect])?;
         for _ in 0..CALIBRATION_ROUNDS {
             if seen > 0.0 && (seen / target).ln().abs() < CALIBRATION_TOLERANCE.ln() {
                 break;
@@ -448,18 +483,22 @@ fn build_case(
                 break;
             }
             effect = next;
-            seen = visibility(&case.traces_with(&[effect])?, &nominal, &floors);
+            seen = seen_of(&case, &[effect])?;
         }
-        case.effects.push(CaseEffect {
+        calibrated.push(CaseEffect {
             effect,
             visibility: seen,
         });
     }
-    case.visibility = match case.effects.as_slice() {
+    case.visibility = match calibrated.as_slice() {
         [] => 0.0,
         [one] => one.visibility,
-        _ => visibility(&case.traces_with(&case.plant_effects())?, &nominal, &floors),
+        many => {
+            let effects: Vec<PlantEffect> = many.iter().map(|e| e.effect).collect();
+            seen_of(&case, &effects)?
+        }
     };
+    case.effects = calibrated;
     Ok(case)
 }
 
@@ -479,7 +518,7 @@ fn first_guess(
             let static_torque_nm = p.ts_nm + 0.3 * op.torque_margin();
             let stribeck_speed_rad_s = op.w_low.abs().max(1e-3) * d.uniform(0.2, 0.6);
             if other {
-                let presliding_rad = d.uniform(1e-3, 4e-3);
+                let presliding_rad = d.uniform(LUGRE_PRESLIDING_RAD.0, LUGRE_PRESLIDING_RAD.1);
                 let sigma0 = static_torque_nm / presliding_rad;
                 PlantEffect::LuGre {
                     static_torque_nm,

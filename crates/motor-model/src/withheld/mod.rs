@@ -32,7 +32,7 @@
 //!
 //! | effect | (a) same shape (SPEC section 5) | (b) other shape |
 //! |---|---|---|
-//! | `stribeck_friction` | `T_c = Ts + (Tst − Ts) exp(−(Ω/Ωs)²)`, breakaway at Tst | LuGre: `ż = Ω − σ0 |Ω| z/g(Ω)`, `g = Ts + (Tst − Ts) exp(−|Ω/Ωs|^δ)`, δ = 0.5 (presliding 1–4 mrad), `T_f = σ0 z + σ1 ż` (σ2 = f) |
+//! | `stribeck_friction` | `T_c = Ts + (Tst − Ts) exp(−(Ω/Ωs)²)`, breakaway at Tst | LuGre: `ż = Ω − σ0 |Ω| z/g(Ω)`, `g = Ts + (Tst − Ts) exp(−|Ω/Ωs|^δ)`, δ = 0.5 (presliding 1–4 mrad, scaled with Tst − Ts by the calibration), `T_f = σ0 z + σ1 ż` (σ2 = f) |
 //! | `cogging_torque` | `A sin(Nθ + φ)` | `A [sin(Nθ + φ) + a2 sin(2Nθ + φ2) + a3 sin(3Nθ + φ3)]` |
 //! | `current_sensor_lag` | `τf İs = I − Is` | critically damped: `Ïs + 2ωc İs + ωc² Is = ωc² I` |
 //! | `thermal_drift` | `Cth dT/dt = I²R − T/Rth`, `R = R0 (1 + αT)` | two nodes: `Cw dTw/dt = I²R − (Tw − Th)/Rwh`, `Ch dTh/dt = (Tw − Th)/Rwh − Th/Rha`, `R = R0 (1 + α Tw)` |
@@ -78,7 +78,9 @@
 //! 2–5 times the breakaway voltage `R Ts/k`, a ±0.6 E reversal square wave and a six-level
 //! staircase, each at most 5 s. Each effect's magnitude is calibrated (a few simulations) so
 //! that alone it changes the current or the speed of some record by 4–25 noise floors RMS; the
-//! value reached is stored as `visibility`.
+//! value reached is stored as `visibility`. [`benchmark_case_with_gap`] calibrates on a measure
+//! the caller gives instead: what is left once the nominal model has absorbed what it can (the
+//! fit lives in another crate; `fit::diagnose::benchmark::calibrated_case` supplies it).
 //!
 //! ```
 //! use motor_model::withheld::{benchmark_case, generate};
@@ -95,8 +97,8 @@ mod forms;
 mod plant;
 
 pub use cases::{
-    benchmark_case, benchmark_cases, case_mix, generate, visibility, CaseEffect, CaseRecords,
-    CaseSpec, RecordRole, RecordSpec,
+    benchmark_case, benchmark_case_with_gap, benchmark_cases, case_mix, generate, visibility,
+    CaseEffect, CaseRecords, CaseSpec, GapMeasure, RecordRole, RecordSpec,
 };
 pub use chain::{
     ChannelRanges, ColouredNoise, MeasurementSpec, NoiseFloors, NoiseSpec, SpeedSensor,
