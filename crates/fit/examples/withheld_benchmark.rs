@@ -190,8 +190,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for i in 0..n {
         let case = case_of(i)?;
         let o = run_case(&case, &settings);
+        // A case sized on the gap stores it as its visibility.
         let after = seen_too
             .then(|| {
+                if !plain {
+                    return Some(case.visibility);
+                }
                 let traces = case.traces_with(&case.plant_effects()).ok()?;
                 nominal_gap(&case, &traces, &settings)
             })

@@ -1595,7 +1595,8 @@ fn electrical_estimate(
 }
 
 /// One equation-error estimate with the electrical signals low-passed at `fraction` of the
-/// sample rate (the angle at a fifth of that, with decimation by 5).
+/// sample rate (the angle at a fifth of that, with decimation by 5, or less on records too
+/// short for twenty rows at 5).
 fn equation_error_estimate(
     records: &[ExcitedRecord<'_>],
     fraction: f64,

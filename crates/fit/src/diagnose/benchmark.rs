@@ -18,10 +18,12 @@ use motor_model::withheld::{benchmark_case_with_gap, generate, CaseRecords, Case
 use motor_model::{Effects, Input, ModelError, MotorParams, Record, Trace, EFFECT_NAMES};
 use serde::Serialize;
 
-use crate::diagnose::run::{diagnose, locate_jumps, with_inputs, DiagnoseSettings, Diagnosis};
+use crate::diagnose::run::{
+    diagnose, fit_nominal, locate_every_jump, with_inputs, DiagnoseSettings, Diagnosis,
+};
 use crate::full_model::Channel;
 use crate::output_error::{
-    equation_error_start, fit_output_error, predict_with_step_factor, voltage_input, ExcitedRecord,
+    equation_error_start, predict_with_step_factor, voltage_input, ExcitedRecord,
 };
 
 /// One case diagnosed.
@@ -158,13 +160,13 @@ pub fn diagnose_case(case: &CaseSpec, settings: &DiagnoseSettings) -> Result<Dia
 }
 
 /// How many noise floors the effects behind `traces` (noise-free records of `case`, one per
-/// record, [`CaseSpec::traces_with`]) leave that no nominal model can absorb: the nominal
-/// model (no effect) fitted by output error to the current and speed of every record (from the
-/// true motor, each channel weighted by its noise floor, `settings`' solver and step), each
-/// voltage jump then moved within its sample period to where that model fits best (the
-/// voltage column says only between which two samples a jump fell: the diagnosis locates them
-/// the same way, here beside the true motor), the model refitted on those instants, and its
-/// prediction compared with the traces. Returns the largest RMS difference of current or
+/// record, [`CaseSpec::traces_with`]) leave that no nominal model can absorb. Each voltage
+/// jump is put on the first sample that shows it, then moved within that sample period to
+/// where the true motor fits the traces best (the voltage column says only between which two
+/// samples a jump fell: the diagnosis locates them the same way, beside its own nominal fit);
+/// the nominal model (no effect) is fitted by output error to the current and speed of every
+/// record on those instants (from the true motor, each channel weighted by its noise floor,
+/// `settings`' solver and step), and its prediction compared with the traces. Returns the largest RMS difference of current or
 /// speed of any record, in that channel's noise floors, or the true motor's at the true
 /// instants where that is smaller (it is a nominal model too); `None` when a fit or
 /// simulation fails.
@@ -210,35 +212,13 @@ pub fn nominal_gap(case: &CaseSpec, traces: &[Trace], settings: &DiagnoseSetting
         })
         .collect();
     let fit_from = |records: &[ExcitedRecord<'_>], from: &MotorParams| {
-        fit_output_error(
-            records,
-            &[],
-            &[],
-            from,
-            &Effects::none(),
-            settings.lm,
-            settings.step_factor,
-            Some(&sigmas),
-        )
-        .ok()
-        .map(|f| f.params)
+        fit_nominal(records, from, settings, Some(&sigmas))
+            .ok()
+            .map(|f| f.params)
     };
     // The jumps located beside the true motor (a model fitted to records with late jumps
     // would move them less far than they fell), then the model fitted on those instants.
-    let located: Vec<Option<Input>> = all
-        .iter()
-        .enumerate()
-        .map(|(k, r)| {
-            locate_jumps(
-                k,
-                r,
-                &case.motor,
-                &Effects::none(),
-                &sigmas,
-                settings.step_factor,
-            )
-        })
-        .collect();
+    let located = locate_every_jump(&all, &case.motor, &sigmas, settings.step_factor);
     let moved = with_inputs(&all, &located);
     let motor = fit_from(&moved, &case.motor)?;
     let gap_of = |records: &[ExcitedRecord<'_>], motor: &MotorParams| -> Option<f64> {

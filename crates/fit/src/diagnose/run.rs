@@ -492,23 +492,24 @@ fn train_statistic(
     (count > 0).then(|| fall / (factor_sum / count as f64))
 }
 
+/// Earliest instant a record's first voltage jump is searched at \[sample periods\].
+const FIRST_JUMP_MARGIN: f64 = 0.02;
 /// Golden-section rounds of the search for one voltage jump's instant (the bracket, one sample
 /// period, shrinks to 0.618¹² ≈ 0.3 % of it).
 const JUMP_SEARCH_ROUNDS: usize = 12;
 
 /// Record `k`'s piecewise-constant voltage with every jump moved, one after the other, to the
-/// instant within the sample period before its first sample at which `motor` with `effects`
-/// fits the record best (weighted squared error of its channels, `sigmas` as in [`channel_scales`]), by a
+/// instant within the sample period before its first sample at which `motor` fits the record
+/// best (weighted squared error of its channels, `sigmas` as in [`channel_scales`]), by a
 /// golden-section search of [`JUMP_SEARCH_ROUNDS`] rounds per jump. A logger's clock is not
 /// tied to the step: the voltage column tells only between which two samples a jump fell, and
 /// a model whose step comes up to a period late leaves a residual at every jump that an effect
 /// acting there (a sensor lag, a saturating inductance) would be named for. `None` when the
 /// voltage is not piecewise constant or nothing could be simulated.
-pub(crate) fn locate_jumps(
+fn locate_jumps(
     k: usize,
     record: &ExcitedRecord<'_>,
     motor: &MotorParams,
-    effects: &Effects,
     sigmas: &[(usize, Channel, f64)],
     step_factor: f64,
 ) -> Option<Input> {
@@ -526,7 +527,7 @@ pub(crate) fn locate_jumps(
             input: &input,
             ..*record
         };
-        let fitted = predict_with_step_factor(&[r], motor, effects, step_factor).ok()?;
+        let fitted = predict_with_step_factor(&[r], motor, &Effects::none(), step_factor).ok()?;
         let mut sse = 0.0;
         for ch in &fitted {
             let sigma = sigmas
@@ -550,8 +551,12 @@ pub(crate) fn locate_jumps(
         if t < 0.5 * dt {
             continue;
         }
-        let lo_limit = levels.get(j.wrapping_sub(1)).map_or(0.0, |l| l.0);
-        let (mut a, mut b) = ((t - dt).max(lo_limit + 0.5 * dt), t);
+        // Half a period after the jump before, or, for the first, just after the record's
+        // start (a step on the first sample after the trigger can fall anywhere before it).
+        let lo_limit = levels
+            .get(j.wrapping_sub(1))
+            .map_or(FIRST_JUMP_MARGIN * dt, |l| l.0 + 0.5 * dt);
+        let (mut a, mut b) = ((t - dt).max(lo_limit), t);
         if b - a <= 0.0 {
             continue;
         }
@@ -588,6 +593,20 @@ pub(crate) fn locate_jumps(
         }
     }
     any.then(|| Input::piecewise(&levels).ok()).flatten()
+}
+
+/// [`locate_jumps`] on every record of `records` (`None` where a record's jumps stay).
+pub(crate) fn locate_every_jump(
+    records: &[ExcitedRecord<'_>],
+    motor: &MotorParams,
+    sigmas: &[(usize, Channel, f64)],
+    step_factor: f64,
+) -> Vec<Option<Input>> {
+    records
+        .iter()
+        .enumerate()
+        .map(|(k, r)| locate_jumps(k, r, motor, sigmas, step_factor))
+        .collect()
 }
 
 /// Shift of a voltage jump's instant for its sensitivity column \[sample periods\].
@@ -1267,16 +1286,7 @@ pub fn diagnose(
 
     progress(DiagnoseProgress::Nominal);
     let fit_nominal = |records: &[ExcitedRecord<'_>], from: &MotorParams| {
-        fit_output_error(
-            records,
-            &[],
-            &[],
-            from,
-            &Effects::none(),
-            settings.lm,
-            settings.step_factor,
-            None,
-        )
+        fit_nominal(records, from, settings, None)
     };
     let predict_nominal = |records: &[ExcitedRecord<'_>], motor: &MotorParams| {
         predict_with_step_factor(records, motor, &Effects::none(), settings.step_factor)
@@ -1298,20 +1308,7 @@ pub fn diagnose(
     // (the voltage column says only between which two samples it fell), then the nominal
     // model refitted on those instants: from here on every fit and test uses them.
     let sigmas = channel_scales(&nominal, &nominal_all);
-    let located: Vec<Option<Input>> = all
-        .iter()
-        .enumerate()
-        .map(|(k, r)| {
-            locate_jumps(
-                k,
-                r,
-                &nominal.params,
-                &Effects::none(),
-                &sigmas,
-                settings.step_factor,
-            )
-        })
-        .collect();
+    let located = locate_every_jump(&all, &nominal.params, &sigmas, settings.step_factor);
     let train: Vec<ExcitedRecord<'_>> = with_inputs(&train, &located);
     let all: Vec<ExcitedRecord<'_>> = with_inputs(&all, &located);
     let nominal = if located.iter().any(Option::is_some) {
@@ -1388,6 +1385,27 @@ pub fn diagnose(
         localisation,
         stages,
     })
+}
+
+/// The nominal model (no effect) fitted by output error to `records` from `from`, with
+/// `settings`' solver and RK4 step, each channel weighted by its level in `sigmas` or, without,
+/// by its own residual.
+pub(crate) fn fit_nominal(
+    records: &[ExcitedRecord<'_>],
+    from: &MotorParams,
+    settings: &DiagnoseSettings,
+    sigmas: Option<&[(usize, Channel, f64)]>,
+) -> Result<FullFit, FitError> {
+    fit_output_error(
+        records,
+        &[],
+        &[],
+        from,
+        &Effects::none(),
+        settings.lm,
+        settings.step_factor,
+        sigmas,
+    )
 }
 
 /// The localisation ([`localise`]) of a fit's residual on the records it was fitted to:

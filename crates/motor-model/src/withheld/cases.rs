@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::chain::{ChannelRanges, MeasurementSpec, NoiseFloors, NoiseSpec, SpeedSensor};
-use super::forms::{withheld_effect_names, Form, PlantEffect, LUGRE_PRESLIDING_RAD};
+use super::forms::{withheld_effect_names, Form, PlantEffect};
 use super::plant::simulate_plant;
 use crate::derived::Derived;
 use crate::error::ModelError;
@@ -21,6 +21,8 @@ const TARGET_VISIBILITY: (f64, f64) = (4.0, 25.0);
 /// Stribeck exponent δ of the LuGre cases \[-\]: far from the Gaussian's 2, so that the
 /// friction excess decays slowly, `exp(−√(|Ω|/Ωs))`.
 const LUGRE_STRIBECK_EXPONENT: f64 = 0.5;
+/// Range of a LuGre friction's presliding displacement `g(0)/σ0` as drawn \[rad\].
+const LUGRE_PRESLIDING_RAD: (f64, f64) = (1e-3, 4e-3);
 /// Magnitude corrections per effect (each one simulation of the case's records).
 const CALIBRATION_ROUNDS: usize = 4;
 /// A visibility within this factor of its target ends the calibration.
@@ -73,7 +75,9 @@ pub struct CaseEffect {
     /// The effect, its form and parameters.
     pub effect: PlantEffect,
     /// Largest RMS change it makes alone on any record's current or speed, in noise floors
-    /// of that channel \[-\].
+    /// of that channel, from the true nominal motor ([`visibility`]) or, for a case sized on a
+    /// gap measure ([`benchmark_case_with_gap`]), from the nominal model that measure fits
+    /// (where it could be computed) \[-\].
     pub visibility: f64,
 }
 
@@ -96,7 +100,7 @@ pub struct CaseSpec {
     /// The records, high step and low step first.
     pub records: Vec<RecordSpec>,
     /// Largest RMS change all effects together make on any record's current or speed, in
-    /// noise floors \[-\] (0 for `none`).
+    /// noise floors, measured as [`CaseEffect::visibility`] is \[-\] (0 for `none`).
     pub visibility: f64,
 }
 
@@ -239,12 +243,29 @@ pub type GapMeasure<'a> = &'a dyn Fn(&CaseSpec, &[Trace]) -> Option<f64>;
 /// so that what the nominal model cannot absorb (by shifting its six parameters and each
 /// voltage jump within its sample period) reaches the drawn target. An effect the nominal
 /// model absorbs whole is no gap between model and records: SPEC section 5 calls such records
-/// `none`. The stored visibilities are `gap`'s.
+/// `none`. The stored visibilities are `gap`'s, or [`visibility`]'s where `gap` returned
+/// `None`.
 pub fn benchmark_case_with_gap(
     seed: u64,
     index: usize,
     n: usize,
     gap: GapMeasure<'_>,
+) -> Result<CaseSpec, ModelError> {
+    case_at(seed, index, n, Some(gap))
+}
+
+/// Case `index` of the `n` cases of `seed`, built alone (so that a caller can build cases in
+/// parallel); equal to `benchmark_cases(seed, n)[index]`.
+pub fn benchmark_case(seed: u64, index: usize, n: usize) -> Result<CaseSpec, ModelError> {
+    case_at(seed, index, n, None)
+}
+
+/// Case `index` of the `n` cases of `seed`, sized on `gap` or, without, on [`visibility`].
+fn case_at(
+    seed: u64,
+    index: usize,
+    n: usize,
+    gap: Option<GapMeasure<'_>>,
 ) -> Result<CaseSpec, ModelError> {
     let mix = case_mix(seed, n);
     let effects = mix.get(index).ok_or_else(|| ModelError::InvalidSetting {
@@ -252,19 +273,7 @@ pub fn benchmark_case_with_gap(
         value: index as f64,
         expected: "an index below the number of cases",
     })?;
-    build_case(seed, index, effects, Some(gap))
-}
-
-/// Case `index` of the `n` cases of `seed`, built alone (so that a caller can build cases in
-/// parallel); equal to `benchmark_cases(seed, n)[index]`.
-pub fn benchmark_case(seed: u64, index: usize, n: usize) -> Result<CaseSpec, ModelError> {
-    let mix = case_mix(seed, n);
-    let effects = mix.get(index).ok_or_else(|| ModelError::InvalidSetting {
-        name: "case index".into(),
-        value: index as f64,
-        expected: "an index below the number of cases",
-    })?;
-    build_case(seed, index, effects, None)
+    build_case(seed, index, effects, gap)
 }
 
 /// The operating points an effect's first guess is sized from.

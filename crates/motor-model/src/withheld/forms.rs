@@ -277,9 +277,8 @@ impl PlantEffect {
     }
 
     /// The same effect with its magnitude multiplied by `factor` > 0 (the shape parameters
-    /// kept): Tst − Ts (and a LuGre friction's presliding displacement, up to
-    /// 4 mrad, the largest drawn: the bristles are the rest of its departure from
-    /// Coulomb friction), A, the sensor delay, the heating rate 1/C (thermal time constants
+    /// kept): Tst − Ts (and a LuGre friction's presliding displacement with it: the bristles
+    /// are the rest of its departure from Coulomb friction), A, the sensor delay, the heating rate 1/C (thermal time constants
     /// kept), c, Vb, and 1 − r (capped at 0.8).
     pub fn scaled(&self, factor: f64, motor: &MotorParams) -> Self {
         let mut e = *self;
@@ -294,10 +293,10 @@ impl PlantEffect {
                 ..
             } => {
                 // The bristles' departure from Coulomb friction scales too: their presliding
-                // displacement g(0)/σ0 (at most the largest drawn), with the bristle's damping
-                // ratio σ1/(2√(σ0 J)) kept.
-                let presliding = (*static_torque_nm / *bristle_stiffness_nm_per_rad * factor)
-                    .min(LUGRE_PRESLIDING_RAD.1);
+                // displacement g(0)/σ0, with the bristle's damping ratio σ1/(2√(σ0 J)) kept.
+                // (The excess is capped at 0.45 of the low step's torque margin against a
+                // first guess of 0.3: the presliding ends at most 1.5 times its draw.)
+                let presliding = *static_torque_nm / *bristle_stiffness_nm_per_rad * factor;
                 *static_torque_nm = motor.ts_nm + factor * (*static_torque_nm - motor.ts_nm);
                 let stiffness = *static_torque_nm / presliding;
                 *bristle_damping_nms_per_rad *= (stiffness / *bristle_stiffness_nm_per_rad).sqrt();
@@ -481,8 +480,6 @@ impl PlantEffect {
 
 /// Largest fall of the inductance, `1 − r`, the scaling allows \[-\].
 const MAX_INDUCTANCE_FALL: f64 = 0.8;
-/// Range of a LuGre friction's presliding displacement `g(0)/σ0` \[rad\] as drawn.
-pub(crate) const LUGRE_PRESLIDING_RAD: (f64, f64) = (1e-3, 4e-3);
 
 fn static_at_least_ts(static_torque_nm: f64, motor: &MotorParams) -> Result<(), ModelError> {
     if static_torque_nm.is_finite() && static_torque_nm >= motor.ts_nm {
