@@ -210,8 +210,11 @@ fn record_rows(
             "record",
             format!(
                 "{n} samples: at least {min} are needed, the speed and acceleration being read \
-                 every {} samples (record for longer, or at a higher rate)",
-                settings.decimation
+                 {} (record for longer, or at a higher rate)",
+                match settings.decimation {
+                    0 | 1 => "at every sample".to_string(),
+                    d => format!("every {d} samples"),
+                }
             ),
         ));
     }

@@ -1625,7 +1625,8 @@ fn equation_error_estimate(
     // Accelerations are second differences of a quantised angle: filter harder than the
     // electrical side and average by decimation, or the noise in the acceleration regressor
     // biases J towards zero. Every START_DECIMATION-th sample, or as many as the shortest
-    // record leaves twenty rows at (a 0.1 s step at 1 kHz has 101 samples).
+    // record leaves twenty rows at (a 0.1 s step at 1 kHz has 101 samples); a record too
+    // short even for every sample is refused with the count every sample would need.
     let shortest = per_record
         .iter()
         .map(|(_, position)| position.len())
@@ -1634,7 +1635,7 @@ fn equation_error_estimate(
     let decimation = (1..=START_DECIMATION)
         .rev()
         .find(|&d| shortest >= crate::mechanical::min_samples(d))
-        .unwrap_or(START_DECIMATION);
+        .unwrap_or(1);
     let settings = InverseModelSettings {
         position_cutoff_hz: 0.2 * fraction / dt_max,
         position_filter_order: 4,

@@ -4,10 +4,11 @@
 //! The cases are [`calibrated_case`]'s: [`motor_model::withheld`]'s random motors, loggers and
 //! effect forms, each effect sized so that the gap it leaves once the nominal model has
 //! absorbed what it can ([`nominal_gap`]) is 4–25 noise floors RMS on some record (or as near
-//! as the generator's limits on its size allow). Each case gives a high and a low step (the training records) and a reversal and a
-//! staircase (held out whole). The diagnosis starts from the equation-error estimate
-//! ([`crate::equation_error_start`]) on the training records and uses its default settings;
-//! samples on an ADC rail are left out ([`crate::find_clipping`]).
+//! as the generator's limits on its size allow). Each case gives a high and a low step (the
+//! training records) and a reversal and a staircase (held out whole). The diagnosis starts
+//! from the equation-error estimate ([`crate::equation_error_start`]) on the training records
+//! and uses its default settings; samples on an ADC rail are left out
+//! ([`crate::find_clipping`]).
 //!
 //! Scores ([`Summary`]): the confusion matrix of the truth against the top-ranked verdict
 //! (cases with one effect or none), the top-1 accuracy (the first effect named is one present,
@@ -166,10 +167,10 @@ pub fn diagnose_case(case: &CaseSpec, settings: &DiagnoseSettings) -> Result<Dia
 /// samples a jump fell: the diagnosis locates them the same way, beside its own nominal fit);
 /// the nominal model (no effect) is fitted by output error to the current and speed of every
 /// record on those instants (from the true motor, each channel weighted by its noise floor,
-/// `settings`' solver and step), and its prediction compared with the traces. Returns the largest RMS difference of current or
-/// speed of any record, in that channel's noise floors, or the true motor's at the true
-/// instants where that is smaller (it is a nominal model too); `None` when a fit or
-/// simulation fails.
+/// `settings`' solver and step), and its prediction compared with the traces. Returns the
+/// largest RMS difference of current or speed of any record, in that channel's noise floors,
+/// or the true motor's at the true instants where that is smaller (it is a nominal model
+/// too); `None` when a fit or simulation fails.
 ///
 /// [`calibrated_case`] sizes every effect on it. Measured against the *true* nominal motor
 /// ([`motor_model::withheld::visibility`]), an effect a parameter shift absorbs — a sensor lag
@@ -211,16 +212,13 @@ pub fn nominal_gap(case: &CaseSpec, traces: &[Trace], settings: &DiagnoseSetting
             ]
         })
         .collect();
-    let fit_from = |records: &[ExcitedRecord<'_>], from: &MotorParams| {
-        fit_nominal(records, from, settings, Some(&sigmas))
-            .ok()
-            .map(|f| f.params)
-    };
     // The jumps located beside the true motor (a model fitted to records with late jumps
     // would move them less far than they fell), then the model fitted on those instants.
     let located = locate_every_jump(&all, &case.motor, &sigmas, settings.step_factor);
     let moved = with_inputs(&all, &located);
-    let motor = fit_from(&moved, &case.motor)?;
+    let motor = fit_nominal(&moved, &case.motor, settings, Some(&sigmas))
+        .ok()?
+        .params;
     let gap_of = |records: &[ExcitedRecord<'_>], motor: &MotorParams| -> Option<f64> {
         let predicted =
             predict_with_step_factor(records, motor, &Effects::none(), settings.step_factor)

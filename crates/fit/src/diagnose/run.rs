@@ -1285,13 +1285,10 @@ pub fn diagnose(
     };
 
     progress(DiagnoseProgress::Nominal);
-    let fit_nominal = |records: &[ExcitedRecord<'_>], from: &MotorParams| {
-        fit_nominal(records, from, settings, None)
-    };
     let predict_nominal = |records: &[ExcitedRecord<'_>], motor: &MotorParams| {
         predict_with_step_factor(records, motor, &Effects::none(), settings.step_factor)
     };
-    let nominal = fit_nominal(&train, start)?;
+    let nominal = fit_nominal(&train, start, settings, None)?;
     // A channel the nominal model explains worse than its mean is what an unmodelled effect
     // can do, and a motor parameter the records do not determine leaves the prediction the
     // diagnosis works on as good as any value of it would: diagnosed, and said
@@ -1312,7 +1309,7 @@ pub fn diagnose(
     let train: Vec<ExcitedRecord<'_>> = with_inputs(&train, &located);
     let all: Vec<ExcitedRecord<'_>> = with_inputs(&all, &located);
     let nominal = if located.iter().any(Option::is_some) {
-        let refit = fit_nominal(&train, &nominal.params)?;
+        let refit = fit_nominal(&train, &nominal.params, settings, None)?;
         // The refit on the located instants replaces the first only when it is a result too.
         match (refit.failure(), refit.termination.converged()) {
             (None, _) => refit,

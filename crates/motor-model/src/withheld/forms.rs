@@ -278,8 +278,8 @@ impl PlantEffect {
 
     /// The same effect with its magnitude multiplied by `factor` > 0 (the shape parameters
     /// kept): Tst − Ts (and a LuGre friction's presliding displacement with it: the bristles
-    /// are the rest of its departure from Coulomb friction), A, the sensor delay, the heating rate 1/C (thermal time constants
-    /// kept), c, Vb, and 1 − r (capped at 0.8).
+    /// are the rest of its departure from Coulomb friction), A, the sensor delay, the heating
+    /// rate 1/C (thermal time constants kept), c, Vb, and 1 − r (capped at 0.8).
     pub fn scaled(&self, factor: f64, motor: &MotorParams) -> Self {
         let mut e = *self;
         match &mut e {
