@@ -4,15 +4,17 @@
 //! on `none`.
 //!
 //! The cases are all 16 of seed 1 (two `none`, two with two effects, twelve with one; about a
-//! minute on two cores); the full benchmark is the `withheld_benchmark` example. The diagnosis
-//! names the right effect first on 14 of the 16: case 0's sensor lag (a sample period, 57
-//! noise floors beside the best nominal model) is named `inductance_saturation` (its refit
-//! runs τf to 0 from the nominal fit, whose L/R has taken the lag), and case 1's thermal drift
-//! (5 floors) `stribeck_friction`. The floor, 0.8, allows three misses.
+//! minute and a half on two cores); the full benchmark is the `withheld_benchmark` example.
+//! The diagnosis names the right effect first on 15 of the 16: case 1's thermal drift (5
+//! floors) is named `stribeck_friction` (with the drift second). Case 0's sensor lag (a
+//! sample period, 57 noise floors beside the best nominal model) used to be named
+//! `inductance_saturation`, until each candidate was judged at its own jump instants. The
+//! floor, 0.875, allows two misses.
 //!
 //! Two more tests diagnose one case each of the 160 that a screening or refit rule used to miss,
 //! as they were found: sized against the true nominal motor (`motor_model::withheld::
-//! benchmark_case`), before the benchmark's cases were sized on the gap.
+//! benchmark_case`), before the benchmark's cases were sized on the gap; two more, one case
+//! each sized on the gap, that the held-out blocks and the jump instants used to miss.
 
 use fit::diagnose::benchmark::{calibrated_case, run_case, CaseOutcome, Summary};
 use fit::diagnose::DiagnoseSettings;
@@ -23,7 +25,7 @@ const SEED: u64 = 1;
 /// Cases of the seed.
 const OF: usize = 16;
 /// Top-1 accuracy the diagnosis must reach on them \[-\].
-const TOP1_FLOOR: f64 = 0.8;
+const TOP1_FLOOR: f64 = 0.875;
 
 #[test]
 fn withheld_effects_are_named_above_the_floor_and_none_raises_no_alarm() {
@@ -71,6 +73,34 @@ fn a_drag_the_residual_asks_to_push_does_not_take_the_refit_of_a_cogging_torque(
     // linear step asked for a negative drag; the refit ran c to 6e-33 and the verdict was
     // `none`. Screened one-sided, the drag scores 0 and the cogging torque is refitted.
     assert_named(19, "cogging_torque");
+}
+
+#[test]
+fn an_effect_only_a_short_training_step_shows_is_judged_on_its_held_out_blocks() {
+    // Case 128 of seed 1's 160, sized on the gap: a cogging torque 12 noise floors from the
+    // nominal model on the low step alone, a record of 112 samples. With blocks of 50 held
+    // out one in four, that step lent no sample to the held-out data: the refit found the
+    // amplitude to 2 % but no held-out gain, and the verdict was `none`.
+    assert_named_calibrated(128, "cogging_torque");
+}
+
+#[test]
+fn a_sensor_lag_the_nominal_fit_took_into_l_is_named_at_its_own_jump_instants() {
+    // Case 11 of seed 1's 160, sized on the gap: a second-order current sensor 7.7 floors
+    // from the nominal model, which took it into L and put the steps late. Refitted from the
+    // nominal model at those instants, τf ran to 1e-109 s and the verdict was `none`; from a
+    // start splitting L/R between L and τf, judged at its own instants, the lag is named.
+    assert_named_calibrated(11, "current_sensor_lag");
+}
+
+/// [`assert_named`] on case `index` of seed 1's 160 sized on the gap the nominal model leaves
+/// (`calibrated_case`).
+fn assert_named_calibrated(index: usize, effect: &str) {
+    let settings = DiagnoseSettings::default();
+    let case = calibrated_case(SEED, index, 160, &settings).expect("a case of the benchmark");
+    let outcome = run_case(&case, &settings);
+    assert_eq!(outcome.truth, [effect]);
+    assert_eq!(outcome.verdict(), effect, "{outcome:?}");
 }
 
 /// Diagnoses case `index` of seed 1's 160 (sized against the true nominal motor), which holds

@@ -214,7 +214,13 @@ pub fn nominal_gap(case: &CaseSpec, traces: &[Trace], settings: &DiagnoseSetting
         .collect();
     // The jumps located beside the true motor (a model fitted to records with late jumps
     // would move them less far than they fell), then the model fitted on those instants.
-    let located = locate_every_jump(&all, &case.motor, &sigmas, settings.step_factor);
+    let located = locate_every_jump(
+        &all,
+        &case.motor,
+        &Effects::none(),
+        &sigmas,
+        settings.step_factor,
+    );
     let moved = with_inputs(&all, &located);
     let motor = fit_nominal(&moved, &case.motor, settings, Some(&sigmas))
         .ok()?

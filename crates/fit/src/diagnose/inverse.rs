@@ -514,6 +514,7 @@ fn unfitted(
         motor: None,
         effects: Effects::none(),
         failure: why,
+        inputs: Vec::new(),
     }
 }
 

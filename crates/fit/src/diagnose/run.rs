@@ -4,8 +4,8 @@
 //! named too).
 //!
 //! **Held-out data.** Every training record is cut into blocks of
-//! [`DiagnoseSettings::block_samples`] samples and every [`DiagnoseSettings::holdout_every`]-th
-//! block is left out of every fit (its samples excluded, as clipped samples are) and judged on
+//! [`DiagnoseSettings::block_samples`] samples (shorter on a record too short to lend two such
+//! blocks) and every [`DiagnoseSettings::holdout_every`]-th block is left out of every fit (its samples excluded, as clipped samples are) and judged on
 //! the model's prediction there. Records given as validation are held out whole, in addition
 //! to those blocks (unless [`DiagnoseSettings::split_with_validation`] is off): an effect the
 //! validation records do not excite (a cogging torque averaged out at speed, a Stribeck dip the
@@ -16,10 +16,13 @@
 //!
 //! **Voltage jumps.** The voltage column says only between which two samples a jump fell.
 //! After the nominal fit each jump is moved to the instant within that sample period where the
-//! nominal model fits its record best, the nominal model is refitted there, and the screening
-//! projects the jumps' instants out with the motor's parameters: otherwise a step modelled up
-//! to a period late leaves a residual at every jump that an effect acting there (a sensor lag,
-//! a saturating inductance) is credited with.
+//! nominal model fits its record best, the nominal model is refitted there, its jumps are
+//! located again beside the refit, and the screening projects the jumps' instants out with the
+//! motor's parameters: otherwise a step modelled up to a period late leaves a residual at every
+//! jump that an effect acting there (a sensor lag, a saturating inductance) is credited with.
+//! Every refitted candidate's jumps are located the same way beside its own model before it is
+//! judged, so that each model is compared at its own best instants (a lag's lie earlier than
+//! the nominal model's, which put them late to mimic it).
 //!
 //! **Candidates** start from the nominal motor and a small size of each effect, its shape
 //! parameters from the records (the cogging period count from the residual's ripple per
@@ -30,7 +33,12 @@
 //! A refit starts where the screening's linear step points (`stepped_start`): a cogging
 //! torque at the phase and amplitude of the ripple the residual holds, a drag, brush drop or
 //! Stribeck excess at the size it asks for; from the start before the step when the stepped
-//! one is too fast for the records' sample rate to simulate (`RefitStart`).
+//! one is too fast for the records' sample rate to simulate, fails, or ends above the base
+//! model's training error (`RefitStart`). An effect the nominal fit absorbed into L (a sensor
+//! lag, a saturating inductance) is also refitted from a start that splits the two
+//! (`absorbed_start`), and the lower cost kept.
+//! A refit whose effect's own part of the prediction is below a noise variance (its size gone
+//! to zero) gives no training statistic and is not named: its fall is the motor's.
 //! Every refit weights each channel by the noise level the nominal fit found for it, in one
 //! stage (not reweighted by its own residuals): the refit then minimises the very cost its
 //! likelihood-ratio statistic and held-out blocks measure, and cannot trade a channel the
@@ -266,6 +274,10 @@ pub struct CandidateReport {
     pub effects: Effects,
     /// Why the refit failed, if it did.
     pub failure: Option<String>,
+    /// Each record's voltage (training records, then validation) with its jumps where the
+    /// refitted model puts them within their sample periods (empty when not refitted).
+    #[serde(skip)]
+    pub inputs: Vec<Option<Input>>,
 }
 
 impl CandidateReport {
@@ -378,7 +390,6 @@ struct Split {
 }
 
 fn split(records: &[ExcitedRecord<'_>], settings: &DiagnoseSettings) -> Split {
-    let block = settings.block_samples.max(1);
     let every = settings.holdout_every.max(2);
     let mut out = Split {
         current_masks: Vec::new(),
@@ -387,6 +398,7 @@ fn split(records: &[ExcitedRecord<'_>], settings: &DiagnoseSettings) -> Split {
     };
     for r in records {
         let n = r.current.len();
+        let block = record_block(n, settings);
         let held: Vec<bool> = (0..n).map(|i| (i / block) % every == every - 1).collect();
         let merge = |m: Option<&[bool]>| -> Vec<bool> {
             (0..n).map(|i| held[i] || m.is_some_and(|m| m[i])).collect()
@@ -396,6 +408,14 @@ fn split(records: &[ExcitedRecord<'_>], settings: &DiagnoseSettings) -> Split {
         out.held.push(held);
     }
     out
+}
+
+/// Block length of a training record of `n` samples \[samples\]:
+/// [`DiagnoseSettings::block_samples`], shortened on a record too short for two held-out blocks
+/// of it (every record then lends at least two blocks to the held-out data: an effect only a
+/// short record shows is judged on it too).
+fn record_block(n: usize, settings: &DiagnoseSettings) -> usize {
+    (n / (2 * settings.holdout_every.max(2))).clamp(1, settings.block_samples.max(1))
 }
 
 /// NRMSE summary over channels (SPEC section 7: each channel's, weighted by sample count) of
@@ -428,6 +448,8 @@ fn nrmse_summary(channels: &[FittedChannel], keep: impl Fn(&FittedChannel, usize
 }
 
 /// Held-out squared errors per block, each channel's residual over its noise level `sigma`.
+/// A block is a run of consecutive held-out samples of a record (a training record's held-out
+/// block), cut every `block` samples (a validation record, held out whole).
 fn block_sse(
     channels: &[FittedChannel],
     sigmas: &[(usize, Channel, f64)],
@@ -435,6 +457,27 @@ fn block_sse(
     block: usize,
 ) -> Vec<f64> {
     use std::collections::BTreeMap;
+    // Each held-out sample's block number within its record.
+    let numbers: Vec<Vec<usize>> = held
+        .iter()
+        .map(|h| {
+            let (mut number, mut run) = (0usize, 0usize);
+            h.iter()
+                .enumerate()
+                .map(|(i, &is_held)| {
+                    if is_held {
+                        let starts_run = i == 0 || !h[i - 1];
+                        if (starts_run && i > 0) || run == block.max(1) {
+                            number += 1;
+                            run = 0;
+                        }
+                        run += 1;
+                    }
+                    number
+                })
+                .collect()
+        })
+        .collect();
     let mut sums: BTreeMap<(usize, usize), f64> = BTreeMap::new();
     for ch in channels {
         let sigma = sigmas
@@ -443,7 +486,7 @@ fn block_sse(
             .map_or(1.0, |s| s.2);
         for (j, &i) in ch.samples.iter().enumerate() {
             if held.get(ch.record).is_some_and(|h| h[i]) {
-                *sums.entry((ch.record, i / block)).or_default() +=
+                *sums.entry((ch.record, numbers[ch.record][i])).or_default() +=
                     ((ch.measured[j] - ch.model[j]) / sigma).powi(2);
             }
         }
@@ -460,6 +503,18 @@ fn train_statistic(
     sigmas: &[(usize, Channel, f64)],
     held: &[Vec<bool>],
 ) -> Option<f64> {
+    train_fall(before, after, sigmas, held).map(|(fall, factor)| fall / factor)
+}
+
+/// The parts of [`train_statistic`]: the fall of the weighted squared error over the training
+/// samples \[noise variances\] and the sample-weighted correlation factor of the residuals
+/// after.
+fn train_fall(
+    before: &[FittedChannel],
+    after: &[FittedChannel],
+    sigmas: &[(usize, Channel, f64)],
+    held: &[Vec<bool>],
+) -> Option<(f64, f64)> {
     let (mut fall, mut factor_sum, mut count) = (0.0, 0.0, 0usize);
     for a in after {
         let b = before
@@ -489,7 +544,7 @@ fn train_statistic(
         factor_sum += factor * e.len() as f64;
         count += e.len();
     }
-    (count > 0).then(|| fall / (factor_sum / count as f64))
+    (count > 0).then(|| (fall, factor_sum / count as f64))
 }
 
 /// Earliest instant a record's first voltage jump is searched at \[sample periods\].
@@ -510,6 +565,7 @@ fn locate_jumps(
     k: usize,
     record: &ExcitedRecord<'_>,
     motor: &MotorParams,
+    effects: &Effects,
     sigmas: &[(usize, Channel, f64)],
     step_factor: f64,
 ) -> Option<Input> {
@@ -527,7 +583,7 @@ fn locate_jumps(
             input: &input,
             ..*record
         };
-        let fitted = predict_with_step_factor(&[r], motor, &Effects::none(), step_factor).ok()?;
+        let fitted = predict_with_step_factor(&[r], motor, effects, step_factor).ok()?;
         let mut sse = 0.0;
         for ch in &fitted {
             let sigma = sigmas
@@ -595,17 +651,19 @@ fn locate_jumps(
     any.then(|| Input::piecewise(&levels).ok()).flatten()
 }
 
-/// [`locate_jumps`] on every record of `records` (`None` where a record's jumps stay).
+/// [`locate_jumps`] on every record of `records` for `motor` with `effects` (`None` where a
+/// record's jumps stay).
 pub(crate) fn locate_every_jump(
     records: &[ExcitedRecord<'_>],
     motor: &MotorParams,
+    effects: &Effects,
     sigmas: &[(usize, Channel, f64)],
     step_factor: f64,
 ) -> Vec<Option<Input>> {
     records
         .iter()
         .enumerate()
-        .map(|(k, r)| locate_jumps(k, r, motor, sigmas, step_factor))
+        .map(|(k, r)| locate_jumps(k, r, motor, effects, sigmas, step_factor))
         .collect()
 }
 
@@ -1174,6 +1232,118 @@ fn candidate_start(
     }
 }
 
+/// Least sum of squares \[noise variances\] that a refitted effect's own part of the prediction
+/// (the refit with and without the effect) must reach for its fall to be credited to it.
+const EFFECT_PART_MIN: f64 = 1.0;
+
+/// Sum over every sample of `a`'s channels of the squared difference from `b`'s, each over its
+/// channel's noise level in `sigmas` \[noise variances\].
+fn weighted_difference(
+    a: &[FittedChannel],
+    b: &[FittedChannel],
+    sigmas: &[(usize, Channel, f64)],
+) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| {
+            let sigma = sigmas
+                .iter()
+                .find(|(r, c, _)| *r == x.record && *c == x.channel)
+                .map_or(1.0, |s| s.2);
+            x.model
+                .iter()
+                .zip(&y.model)
+                .map(|(p, q)| ((p - q) / sigma).powi(2))
+                .sum::<f64>()
+        })
+        .sum()
+}
+
+/// Share of the base model's L/R a sensor lag's absorbed start gives the lag
+/// ([`absorbed_start`]).
+const LAG_SPLIT: f64 = 0.5;
+
+/// An inductance saturation's absorbed start ([`absorbed_start`]): its saturation current
+/// \[share of the training records' peak current\] and its ratio `r`.
+const SATURATION_ABSORBED: (f64, f64) = (0.3, 0.5);
+
+/// A start for `kind` beside the model that absorbed it, where the effect trades against a
+/// motor parameter the base fit has already moved to mimic it (from the base model, growing
+/// the effect alone only adds to what that parameter does):
+/// - a sensor lag: L cut by [`LAG_SPLIT`] and the lag given that share of L/R (a first-order
+///   sensor after a first-order electrical response delays the current by about the sum of
+///   their time constants, which a model without the sensor gives its L/R alone);
+/// - an inductance saturation ([`SATURATION_ABSORBED`]): L0 raised so that the saturating
+///   inductance, averaged over the training records' current weighted by how fast it moves
+///   (where L acts), is the base model's L.
+///
+/// `None` for the other effects, or when the motor would not be one.
+fn absorbed_start(
+    kind: EffectKind,
+    motor: &MotorParams,
+    records: &[ExcitedRecord<'_>],
+) -> Option<(MotorParams, Effect)> {
+    let with_l = |l_henry: f64| {
+        MotorParams::new(
+            motor.r_ohm,
+            l_henry,
+            motor.k_nm_per_a,
+            motor.f_nms_per_rad,
+            motor.j_kgm2,
+            motor.ts_nm,
+        )
+        .ok()
+    };
+    match kind {
+        EffectKind::CurrentSensorLag => Some((
+            with_l(motor.l_henry * (1.0 - LAG_SPLIT))?,
+            Effect::CurrentSensorLag(CurrentSensorLag {
+                tau_f_s: LAG_SPLIT * motor.l_henry / motor.r_ohm,
+            }),
+        )),
+        EffectKind::InductanceSaturation => {
+            let (share, ratio) = SATURATION_ABSORBED;
+            let sat = InductanceSaturation {
+                saturation_current_a: share * records_peak_current(records),
+                min_ratio: ratio,
+            };
+            let (mut weighted, mut weight) = (0.0, 0.0);
+            for r in records {
+                for w in r.current.windows(2) {
+                    let moved = (w[1] - w[0]).abs();
+                    weighted += moved * sat.factor(0.5 * (w[0] + w[1]));
+                    weight += moved;
+                }
+            }
+            let mean = weighted / weight;
+            (mean.is_finite() && mean > 0.0).then_some(())?;
+            Some((
+                with_l(motor.l_henry / mean)?,
+                Effect::InductanceSaturation(sat),
+            ))
+        }
+        _ => None,
+    }
+}
+
+/// Every record's voltage with its jumps located ([`locate_jumps`]) beside `motor` with
+/// `effects`, searched within the sample periods of `grid` (the records with their jumps where
+/// the voltage column puts them); a record whose jumps stay keeps `grid`'s. Every entry is
+/// `Some` ([`with_inputs`] then replaces every record's voltage).
+fn located_inputs(
+    grid: &[ExcitedRecord<'_>],
+    motor: &MotorParams,
+    effects: &Effects,
+    sigmas: &[(usize, Channel, f64)],
+    settings: &DiagnoseSettings,
+) -> Vec<Option<Input>> {
+    locate_every_jump(grid, motor, effects, sigmas, settings.step_factor)
+        .into_iter()
+        .zip(grid)
+        .map(|(moved, r)| moved.or_else(|| Some(r.input.clone())))
+        .collect()
+}
+
 /// Whether a converged fit refused for `refusal` still gives a model the diagnosis can judge
 /// by its prediction (`kind`: the effect refitted; `None` for the nominal fit): refused only
 /// because the records do not determine every parameter (no intervals, or one too wide) — a
@@ -1216,6 +1386,9 @@ struct Base<'a> {
     fitted: Vec<FittedChannel>,
     train: &'a [ExcitedRecord<'a>],
     all: &'a [ExcitedRecord<'a>],
+    /// `all` with every voltage jump where the voltage column puts it (on the first sample
+    /// that shows it), the bracket a refit's jumps are located in.
+    grid: &'a [ExcitedRecord<'a>],
 }
 
 /// Identifies the motor on `records`, localises its residual and looks for the unmodelled
@@ -1272,10 +1445,12 @@ pub fn diagnose(
     .collect();
     let blocks = || {
         format!(
-            "every {}th block of {} samples of each record held out ({} %)",
+            "every {}th block of {} samples of each record held out ({} %; shorter blocks on \
+             a record under {} samples, so that it lends two)",
             settings.holdout_every.max(2),
             settings.block_samples.max(1),
-            100 / settings.holdout_every.max(2)
+            100 / settings.holdout_every.max(2),
+            2 * settings.holdout_every.max(2) * settings.block_samples.max(1)
         )
     };
     let heldout = match (&masks, validation.len()) {
@@ -1305,8 +1480,16 @@ pub fn diagnose(
     // (the voltage column says only between which two samples it fell), then the nominal
     // model refitted on those instants: from here on every fit and test uses them.
     let sigmas = channel_scales(&nominal, &nominal_all);
-    let located = locate_every_jump(&all, &nominal.params, &sigmas, settings.step_factor);
-    let train: Vec<ExcitedRecord<'_>> = with_inputs(&train, &located);
+    let grid = all.clone();
+    let located = locate_every_jump(
+        &all,
+        &nominal.params,
+        &Effects::none(),
+        &sigmas,
+        settings.step_factor,
+    );
+    let train_grid = train;
+    let train: Vec<ExcitedRecord<'_>> = with_inputs(&train_grid, &located);
     let all: Vec<ExcitedRecord<'_>> = with_inputs(&all, &located);
     let nominal = if located.iter().any(Option::is_some) {
         let refit = fit_nominal(&train, &nominal.params, settings, None)?;
@@ -1319,12 +1502,28 @@ pub fn diagnose(
     } else {
         nominal
     };
+    // The jumps located again beside the refitted model, in its weights: a candidate's are
+    // located beside its own refit, and each model is judged at its own best instants.
+    let sigmas = channel_scales(&nominal, &predict_nominal(&all, &nominal.params)?);
+    let inputs = located_inputs(&grid, &nominal.params, &Effects::none(), &sigmas, settings);
+    let train: Vec<ExcitedRecord<'_>> = with_inputs(&train_grid, &inputs);
+    let all: Vec<ExcitedRecord<'_>> = with_inputs(&grid, &inputs);
     let nominal_all = predict_nominal(&all, &nominal.params)?;
     // The noise level of each channel, as the nominal fit weighted it: the same for every
     // candidate, so that their held-out errors compare.
     let sigmas = channel_scales(&nominal, &nominal_all);
     let localisation = localise_fit(&all, &nominal_all, names, &settings.localise)?;
 
+    // A stage's records carry the jump instants of the model it starts from: the nominal
+    // model's for the first, the chosen refit's for the next (one slot per stage, filled once).
+    let stage_inputs: Vec<std::cell::OnceCell<Vec<Option<Input>>>> =
+        (0..settings.max_effects.max(1))
+            .map(|_| Default::default())
+            .collect();
+    let stage_records: Vec<std::cell::OnceCell<(Vec<ExcitedRecord<'_>>, Vec<ExcitedRecord<'_>>)>> =
+        (0..settings.max_effects.max(1))
+            .map(|_| Default::default())
+            .collect();
     let mut stages: Vec<Stage> = Vec::new();
     let mut base = Base {
         motor: nominal.params,
@@ -1332,6 +1531,7 @@ pub fn diagnose(
         fitted: nominal_all,
         train: &train,
         all: &all,
+        grid: &grid,
     };
     for stage_no in 1..=settings.max_effects.max(1) {
         let kinds: Vec<EffectKind> = settings
@@ -1359,20 +1559,30 @@ pub fn diagnose(
                 .candidates
                 .iter()
                 .find(|c| c.name == name.as_str())
-                .and_then(|c| c.motor.map(|m| (m, c.effects)))
+                .and_then(|c| c.motor.map(|m| (m, c.effects, c.inputs.clone())))
         });
         stages.push(stage);
-        let Some((motor, effects)) = next else {
+        let Some((motor, effects, inputs)) = next else {
             break;
         };
-        // The next stage starts from the model with the chosen effect.
-        let fitted = predict_with_step_factor(&all, &motor, &effects, settings.step_factor)?;
+        // The next stage starts from the model with the chosen effect, on its jump instants.
+        let (Some(slot), Some(records)) = (
+            stage_inputs.get(stage_no - 1),
+            stage_records.get(stage_no - 1),
+        ) else {
+            break;
+        };
+        let inputs = slot.get_or_init(|| inputs);
+        let (train_now, all_now) =
+            records.get_or_init(|| (with_inputs(&train, inputs), with_inputs(&all, inputs)));
+        let fitted = predict_with_step_factor(all_now, &motor, &effects, settings.step_factor)?;
         base = Base {
             motor,
             effects,
             fitted,
-            train: &train,
-            all: &all,
+            train: train_now,
+            all: all_now,
+            grid: &grid,
         };
     }
     Ok(Diagnosis {
@@ -1798,6 +2008,7 @@ fn run_stage(
             motor: None,
             effects,
             failure: why,
+            inputs: Vec::new(),
         };
     // Without the evidence of a refit, the screening score speaks: no evidence below the
     // level, evidence the refit could not resolve above it.
@@ -1819,40 +2030,98 @@ fn run_stage(
         // nominal fit's channel levels): a refit reweighted by its own residuals would
         // minimise another cost than the one its likelihood-ratio test and held-out blocks
         // measure, and could trade a channel the effect does not touch for one it does.
-        let fit_from = |start: Effect| {
+        let fit_on = |train: &[ExcitedRecord<'_>], motor: &MotorParams, start: Effect| {
             fit_output_error(
-                base.train,
+                train,
                 &[],
                 &[],
-                &base.motor,
+                motor,
                 &base.effects.with(start),
                 settings.lm,
                 settings.step_factor,
                 Some(sigmas),
             )
         };
-        let RefitStart { stepped, plain } = starts[k];
-        let outcome = match fit_from(stepped) {
-            Err(FitError::BadData { series, .. }) if series == START_SERIES && stepped != plain => {
-                fit_from(plain)
-            }
-            other => other,
-        }
-        .map_err(|e| e.to_string())
-        .and_then(|fit| match (&fit.refusal, fit.failure()) {
+        let accept = |fit: FullFit| match (&fit.refusal, fit.failure()) {
             (_, None) => Ok(fit),
             (Some(r), Some(_)) if fit.termination.converged() && diagnosable(r, Some(kind)) => {
                 Ok(fit)
             }
             (_, Some(why)) => Err(why),
-        })
-        .and_then(|fit| {
-            predict_with_step_factor(base.all, &fit.params, &fit.effects, settings.step_factor)
-                .map(|pred| (fit, pred))
+        };
+        // The refit's prediction with every jump located beside the refitted model, as the
+        // base model's are beside it: each model is judged at its own best instants.
+        // With the effect's own part of that prediction, in noise variances.
+        let judged = |fit: FullFit| {
+            let inputs = located_inputs(base.grid, &fit.params, &fit.effects, sigmas, settings);
+            let all = with_inputs(base.all, &inputs);
+            let predict = |effects: &Effects| {
+                predict_with_step_factor(&all, &fit.params, effects, settings.step_factor)
+                    .map_err(|e| e.to_string())
+            };
+            let pred = predict(&fit.effects)?;
+            let part = weighted_difference(&pred, &predict(&base.effects)?, sigmas);
+            drop(all);
+            Ok((fit, pred, inputs, part))
+        };
+        let RefitStart { stepped, plain } = starts[k];
+        let refit_from = |start: Effect| {
+            fit_on(base.train, &base.motor, start)
                 .map_err(|e| e.to_string())
-        });
+                .and_then(accept)
+                .and_then(judged)
+        };
+        let outcome = match fit_on(base.train, &base.motor, stepped) {
+            Err(FitError::BadData { series, .. }) if series == START_SERIES && stepped != plain => {
+                fit_on(base.train, &base.motor, plain)
+            }
+            other => other,
+        }
+        .map_err(|e| e.to_string())
+        .and_then(accept);
+        // An effect the base fit absorbed into a motor parameter (a sensor lag into L, its
+        // jumps placed late to match a current rising at once; a saturation into a mean L) is
+        // a saddle there: the effect grown alone only adds to what the parameter does. It is
+        // also refitted from a start that splits the two, on the jumps located beside that
+        // start, and the lower cost kept.
+        let outcome = match absorbed_start(kind, &base.motor, base.train) {
+            Some((motor, start)) => {
+                let inputs = located_inputs(
+                    base.grid,
+                    &motor,
+                    &base.effects.with(start),
+                    sigmas,
+                    settings,
+                );
+                let train = with_inputs(base.train, &inputs);
+                let split = fit_on(&train, &motor, start)
+                    .map_err(|e| e.to_string())
+                    .and_then(accept);
+                match (outcome, split) {
+                    (Ok(a), Ok(b)) => Ok(if b.cost < a.cost { b } else { a }),
+                    (Err(_), Ok(b)) => Ok(b),
+                    (a, Err(_)) => a,
+                }
+            }
+            None => outcome,
+        }
+        .and_then(judged);
+        // A refit from the stepped start that fails, or ends above the base model's training
+        // error (in a worse minimum than the one beside which it started), is retried from
+        // the plain start, and the larger fall kept.
+        let fall = |pred: &[FittedChannel]| {
+            train_fall(&base.fitted, pred, sigmas, held).map_or(f64::NEG_INFINITY, |f| f.0)
+        };
+        let outcome = match outcome {
+            Ok(first) if stepped != plain && fall(&first.1) < 0.0 => match refit_from(plain) {
+                Ok(second) if fall(&second.1) > fall(&first.1) => Ok(second),
+                _ => Ok(first),
+            },
+            Err(why) if stepped != plain => refit_from(plain).map_err(|_| why),
+            other => other,
+        };
         let report = match outcome {
-            Ok((fit, pred)) => {
+            Ok((fit, pred, inputs, part)) => {
                 let own: Vec<EffectEstimate> = fit
                     .effect_estimates
                     .iter()
@@ -1860,7 +2129,11 @@ fn run_stage(
                     .cloned()
                     .collect();
                 let sse = block_sse(&pred, sigmas, held, block);
-                let statistic = train_statistic(&base.fitted, &pred, sigmas, held);
+                // An effect whose own part of the prediction is below a noise variance (its
+                // size gone to zero) gives no statistic: the fall is the motor's refit alone.
+                let statistic = (part >= EFFECT_PART_MIN)
+                    .then(|| train_statistic(&base.fitted, &pred, sigmas, held))
+                    .flatten();
                 let motor_shift = PARAM_NAMES
                     .iter()
                     .zip(base.motor.values())
@@ -1895,6 +2168,7 @@ fn run_stage(
                         heldout_nrmse_after: nrmse_summary(&pred, held_mask),
                         motor_shift,
                         motor: Some(fit.params),
+                        inputs,
                         ..unfitted(k, fit.effects, assessment, None)
                     },
                     sse,
@@ -2147,6 +2421,7 @@ mod tests {
                 fitted,
                 train: &excited,
                 all: &excited,
+                grid: &excited,
             };
             let lin =
                 output_error_sensitivity(&excited, &motor, &Effects::none(), &sigmas, None, 8.0)
@@ -2197,5 +2472,35 @@ mod tests {
                 &projection
             ));
         }
+    }
+
+    #[test]
+    fn a_short_training_record_lends_two_held_out_blocks_and_each_run_is_a_block() {
+        let settings = DiagnoseSettings::default();
+        // 4 blocks of 50 held out one in four: a record under 400 samples gets shorter ones.
+        assert_eq!(record_block(5000, &settings), 50);
+        assert_eq!(record_block(400, &settings), 50);
+        assert_eq!(record_block(112, &settings), 14);
+        let n = 112;
+        let block = record_block(n, &settings);
+        let held: Vec<bool> = (0..n).map(|i| (i / block) % 4 == 3).collect();
+        assert_eq!(held.iter().filter(|&&h| h).count(), 28);
+        // A training record's held-out runs are its blocks; a validation record, held out
+        // whole, is cut every `block_samples`.
+        let channel = |record: usize, n: usize| FittedChannel {
+            record,
+            channel: Channel::Current,
+            samples: (0..n).collect(),
+            measured: vec![1.0; n],
+            model: vec![0.0; n],
+        };
+        let sigmas = [(0, Channel::Current, 1.0), (1, Channel::Current, 1.0)];
+        let sse = block_sse(
+            &[channel(0, n), channel(1, 120)],
+            &sigmas,
+            &[held, vec![true; 120]],
+            settings.block_samples,
+        );
+        assert_eq!(sse, vec![14.0, 14.0, 50.0, 50.0, 20.0]);
     }
 }

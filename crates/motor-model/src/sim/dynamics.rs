@@ -259,8 +259,7 @@ impl Dynamics for BrushDrop {
 impl Dynamics for InductanceSaturation {
     /// `r + (1 − r)/(1 + (I/I_sat)²)`.
     fn inductance_factor(&self, i: f64) -> f64 {
-        let u = i / self.saturation_current_a;
-        self.min_ratio + (1.0 - self.min_ratio) / (1.0 + u * u)
+        self.factor(i)
     }
     fn min_inductance_factor(&self) -> f64 {
         self.min_ratio

@@ -89,6 +89,14 @@ pub struct InductanceSaturation {
     pub min_ratio: f64,
 }
 
+impl InductanceSaturation {
+    /// The factor `L(I)/L0 = r + (1 − r)/(1 + (I/I_sat)²)` \[-\] at current `i` \[A\].
+    pub fn factor(&self, i: f64) -> f64 {
+        let u = i / self.saturation_current_a;
+        self.min_ratio + (1.0 - self.min_ratio) / (1.0 + u * u)
+    }
+}
+
 /// The set of effects switched on in a simulation; the empty set is the paper's model.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Effects {
