@@ -28,7 +28,8 @@
 //!
 //! **Held-out data and the verdict.** As in [`crate::diagnose::run`]: validation records are
 //! held out whole, else every [`InverseDiagnoseSettings::holdout_every`]-th block of
-//! [`InverseDiagnoseSettings::block_rows`] rows. The squared errors are counted in units of the
+//! [`InverseDiagnoseSettings::block_rows`] rows (not shortened on short records, unlike
+//! there). The squared errors are counted in units of the
 //! base model's training residual variance (the inverse model's residual is mostly model error,
 //! not sensor noise, and an improvement is judged against what the base model leaves), the
 //! training statistic divided by the residual's correlation factor. Candidates are ranked by
