@@ -532,7 +532,14 @@ fn train_fall(
         let train: Vec<usize> = (0..a.samples.len())
             .filter(|&j| !held.get(a.record).is_some_and(|h| h[a.samples[j]]))
             .collect();
-        if train.len() <= CORRELATION_LAGS + 1 || b.model.len() != a.model.len() {
+        // A channel too short for every lag of the correlation factor (a record of a few
+        // dozen samples) takes a quarter of its length in lags, rather than no statistic.
+        let lags = if train.len() > CORRELATION_LAGS + 1 {
+            CORRELATION_LAGS
+        } else {
+            train.len() / 4
+        };
+        if lags == 0 || b.model.len() != a.model.len() {
             continue;
         }
         let e: Vec<f64> = train
@@ -544,7 +551,7 @@ fn train_fall(
             .iter()
             .map(|&j| ((b.measured[j] - b.model[j]) / sigma).powi(2))
             .sum();
-        let factor = correlation_factor(&e, CORRELATION_LAGS);
+        let factor = correlation_factor(&e, lags);
         fall += sse_before - sse_after;
         factor_sum += factor * e.len() as f64;
         count += e.len();
@@ -2507,5 +2514,32 @@ mod tests {
             settings.block_samples,
         );
         assert_eq!(sse, vec![14.0, 14.0, 50.0, 50.0, 20.0]);
+    }
+
+    #[test]
+    fn a_channel_shorter_than_the_correlation_lags_still_gives_a_training_statistic() {
+        // 20 training samples, fewer than the 25 lags + 1: the fall is counted, with a
+        // quarter of the length in lags, not dropped (which read p = 1 on records of a few
+        // dozen samples).
+        let channel = |model: f64| FittedChannel {
+            record: 0,
+            channel: Channel::Current,
+            samples: (0..20).collect(),
+            measured: (0..20)
+                .map(|i| if i % 2 == 0 { 1.0 } else { -1.0 })
+                .collect(),
+            model: vec![model; 20],
+        };
+        let sigmas = [(0, Channel::Current, 1.0)];
+        let (fall, factor) = train_fall(
+            &[channel(1.0)],
+            &[channel(0.0)],
+            &sigmas,
+            &[vec![false; 20]],
+        )
+        .expect("a statistic");
+        // Before: residuals 0 and -2 (sum of squares 40); after: ±1 (20).
+        assert_eq!(fall, 20.0);
+        assert!(factor >= 1.0);
     }
 }
