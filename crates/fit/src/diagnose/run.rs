@@ -452,6 +452,14 @@ fn nrmse_summary(channels: &[FittedChannel], keep: impl Fn(&FittedChannel, usize
     }
 }
 
+/// The noise level `sigmas` gives record `record`'s `channel` (see [`channel_scales`]).
+fn channel_sigma(sigmas: &[(usize, Channel, f64)], record: usize, channel: Channel) -> Option<f64> {
+    sigmas
+        .iter()
+        .find(|(r, c, _)| *r == record && *c == channel)
+        .map(|s| s.2)
+}
+
 /// Held-out squared errors per block, each channel's residual over its noise level `sigma`.
 /// A block is a run of consecutive held-out samples of a record (a training record's held-out
 /// block), cut every `block` samples (a validation record, held out whole).
@@ -485,10 +493,7 @@ fn block_sse(
         .collect();
     let mut sums: BTreeMap<(usize, usize), f64> = BTreeMap::new();
     for ch in channels {
-        let sigma = sigmas
-            .iter()
-            .find(|(r, c, _)| *r == ch.record && *c == ch.channel)
-            .map_or(1.0, |s| s.2);
+        let sigma = channel_sigma(sigmas, ch.record, ch.channel).unwrap_or(1.0);
         for (j, &i) in ch.samples.iter().enumerate() {
             if held.get(ch.record).is_some_and(|h| h[i]) {
                 *sums.entry((ch.record, numbers[ch.record][i])).or_default() +=
@@ -525,10 +530,7 @@ fn train_fall(
         let b = before
             .iter()
             .find(|b| b.record == a.record && b.channel == a.channel)?;
-        let sigma = sigmas
-            .iter()
-            .find(|(r, c, _)| *r == a.record && *c == a.channel)
-            .map_or(1.0, |s| s.2);
+        let sigma = channel_sigma(sigmas, a.record, a.channel).unwrap_or(1.0);
         let train: Vec<usize> = (0..a.samples.len())
             .filter(|&j| !held.get(a.record).is_some_and(|h| h[a.samples[j]]))
             .collect();
@@ -598,10 +600,7 @@ fn locate_jumps(
         let fitted = predict_with_step_factor(&[r], motor, effects, step_factor).ok()?;
         let mut sse = 0.0;
         for ch in &fitted {
-            let sigma = sigmas
-                .iter()
-                .find(|(r, c, _)| *r == k && *c == ch.channel)
-                .map_or(1.0, |s| s.2);
+            let sigma = channel_sigma(sigmas, k, ch.channel).unwrap_or(1.0);
             sse += ch
                 .measured
                 .iter()
@@ -697,10 +696,7 @@ fn record_rows(
     let fitted = predict_with_step_factor(&[r], &base.motor, &base.effects, step_factor).ok()?;
     let mut rows = Vec::new();
     for ch in &fitted {
-        let sigma = sigmas
-            .iter()
-            .find(|(r, c, _)| *r == k && *c == ch.channel)
-            .map(|s| s.2)?;
+        let sigma = channel_sigma(sigmas, k, ch.channel)?;
         let mask = match ch.channel {
             Channel::Current => record.exclude_current,
             Channel::Speed | Channel::EncoderSpeed => record.exclude_speed,
@@ -1258,10 +1254,7 @@ fn weighted_difference(
     a.iter()
         .zip(b)
         .map(|(x, y)| {
-            let sigma = sigmas
-                .iter()
-                .find(|(r, c, _)| *r == x.record && *c == x.channel)
-                .map_or(1.0, |s| s.2);
+            let sigma = channel_sigma(sigmas, x.record, x.channel).unwrap_or(1.0);
             x.model
                 .iter()
                 .zip(&y.model)
