@@ -162,67 +162,99 @@ fn rebuild_voltage(
     // differences in the noise made 0 → −12 V at the head of a ±12 V PRBS of 50 bits a
     // second at 2 kHz look like noise: a 24 V reversal every 40 samples set the level at 15 V).
     let threshold = |sigma: f64| (10.0 * sigma).max(1e-3 * (hi - lo));
-    let mut sigma = noise_std(voltage);
-    let mut starts = jumps(voltage, threshold(sigma));
-    for _ in 0..JUMP_PASSES {
-        let flat = noise_between(voltage, &starts);
-        if flat >= sigma {
-            break;
-        }
-        sigma = flat;
-        let again = jumps(voltage, threshold(sigma));
-        if again == starts {
-            break;
-        }
-        starts = again;
-    }
     let sampled = || {
         Input::sampled(0.0, dt, voltage.to_vec())
             .map(|i| (i, Vec::new()))
             .map_err(FitError::model("voltage"))
     };
-    if starts.len() * MIN_SAMPLES_PER_LEVEL > voltage.len() {
-        return sampled();
-    }
-    let scale = VoltageScale::of(voltage, quantum_v);
-    let mut steps = Vec::with_capacity(starts.len());
-    let mut priors = Vec::with_capacity(starts.len());
-    for (j, &s) in starts.iter().enumerate() {
-        let e = starts.get(j + 1).copied().unwrap_or(voltage.len());
-        let seg = &voltage[s..e];
-        let mean = seg.iter().sum::<f64>() / seg.len() as f64;
-        let rms = (seg.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / seg.len() as f64).sqrt();
-        // The rounding of the mean is no scatter: a record that holds one code throughout (a
-        // step at its first sample read without noise) has an RMS of 1e-15 about its mean,
-        // and replayed as samples it lost its level's prior (R, L, k, f, J 20–80 half-widths
-        // off the truth of a half-step quantisation bias).
-        let rounding = 1e-12 * hi.abs().max(lo.abs());
-        if rms > 4.0 * sigma + 1e-3 * (hi - lo) + rounding {
-            // Not flat between jumps (a sine, a ramp): replay the samples.
-            return sampled();
+    // The levels from a first noise level `sigma0`; `None` when the voltage is not piecewise
+    // constant at that level.
+    let levels_from = |sigma0: f64| -> Option<Result<(Input, Vec<LevelPrior>), FitError>> {
+        let mut sigma = sigma0;
+        let mut starts = jumps(voltage, threshold(sigma));
+        for _ in 0..JUMP_PASSES {
+            let flat = noise_between(voltage, &starts);
+            if flat >= sigma {
+                break;
+            }
+            sigma = flat;
+            let again = jumps(voltage, threshold(sigma));
+            if again == starts {
+                break;
+            }
+            starts = again;
         }
-        let level = estimate_level(seg, &scale).unwrap_or(LevelEstimate {
-            volts: mean,
-            variance_v2: 0.0,
-            bias_variance_v2: 0.0,
-            bias_code: 0,
-        });
-        let (start, start_variance_s2) = if s == 0 {
-            (0.0, 0.0)
-        } else {
-            let lead = if expected_starts { 0.5 * dt } else { 0.0 };
-            (t[s] - t[0] - lead, dt * dt / 12.0)
-        };
-        steps.push((start, level.volts));
-        priors.push(LevelPrior {
-            volts_variance_v2: level.variance_v2,
-            volts_bias_variance_v2: level.bias_variance_v2,
-            volts_bias_code: level.bias_code,
-            start_variance_s2,
-        });
+        if (starts.len() - 1) * MIN_SAMPLES_PER_LEVEL > voltage.len() {
+            return None;
+        }
+        let scale = VoltageScale::of(voltage, quantum_v);
+        let mut steps = Vec::with_capacity(starts.len());
+        let mut priors = Vec::with_capacity(starts.len());
+        for (j, &s) in starts.iter().enumerate() {
+            let e = starts.get(j + 1).copied().unwrap_or(voltage.len());
+            let seg = &voltage[s..e];
+            let mean = seg.iter().sum::<f64>() / seg.len() as f64;
+            let rms =
+                (seg.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / seg.len() as f64).sqrt();
+            // The rounding of the mean is no scatter: a record that holds one code throughout
+            // (a step at its first sample read without noise) has an RMS of 1e-15 about its
+            // mean, and replayed as samples it lost its level's prior (R, L, k, f, J 20–80
+            // half-widths off the truth of a half-step quantisation bias).
+            let rounding = 1e-12 * hi.abs().max(lo.abs());
+            if rms > 4.0 * sigma + 1e-3 * (hi - lo) + rounding {
+                // Not flat between jumps (a sine, a ramp): replay the samples.
+                return None;
+            }
+            let level = estimate_level(seg, &scale).unwrap_or(LevelEstimate {
+                volts: mean,
+                variance_v2: 0.0,
+                bias_variance_v2: 0.0,
+                bias_code: 0,
+            });
+            let (start, start_variance_s2) = if s == 0 {
+                (0.0, 0.0)
+            } else {
+                let lead = if expected_starts { 0.5 * dt } else { 0.0 };
+                (t[s] - t[0] - lead, dt * dt / 12.0)
+            };
+            steps.push((start, level.volts));
+            priors.push(LevelPrior {
+                volts_variance_v2: level.variance_v2,
+                volts_bias_variance_v2: level.bias_variance_v2,
+                volts_bias_code: level.bias_code,
+                start_variance_s2,
+            });
+        }
+        Some(
+            Input::piecewise(&steps)
+                .map(|input| (input, priors))
+                .map_err(FitError::model("voltage")),
+        )
+    };
+    let sigma = noise_std(voltage);
+    if let Some(levels) = levels_from(sigma) {
+        return levels;
     }
-    let input = Input::piecewise(&steps).map_err(FitError::model("voltage"))?;
-    Ok((input, priors))
+    // Jumps many beside the record's length set the first noise level from their own second
+    // differences, above themselves (six ±6.4 V reversals in 150 samples read 1.5 V, and no
+    // jump passed ten of it): the noise again without the windows that straddle a change
+    // larger than three of that level.
+    let quiet = noise_without_changes(voltage, 3.0 * sigma);
+    match (quiet < sigma).then(|| levels_from(quiet)).flatten() {
+        Some(levels) => levels,
+        None => sampled(),
+    }
+}
+
+/// [`noise_std`] of `voltage` from the second differences of the windows of three samples
+/// whose two changes are both at most `above` in size.
+fn noise_without_changes(voltage: &[f64], above: f64) -> f64 {
+    let d2: Vec<f64> = voltage
+        .windows(3)
+        .filter(|w| (w[1] - w[0]).abs() <= above && (w[2] - w[1]).abs() <= above)
+        .map(squared_second_difference)
+        .collect();
+    noise_of_second_differences(d2, voltage)
 }
 
 /// Passes of [`rebuild_voltage`]'s jump search on the noise between the jumps found.

@@ -149,3 +149,58 @@ fn a_step_pair_of_a_hundred_samples_gives_a_start() {
         "{start:?}"
     );
 }
+
+/// Reversals every 25 samples of a 150-sample record read with less than one ADC step of
+/// noise (the voltage holds one code, with a one-step blip on two samples): the second
+/// differences of the six ±6.4 V jumps set the first noise level at 1.5 V, above the jumps'
+/// own tenth, and the record was replayed as samples, its jumps fixed on the grid. The noise
+/// is taken again without the windows that straddle the jumps, and the levels are found.
+#[test]
+fn a_short_reversal_record_read_without_noise_keeps_its_jumps() {
+    let dt = 1e-3;
+    let code = 12.75 / 4096.0;
+    let t: Vec<f64> = (0..150).map(|i| f64::from(i) * dt).collect();
+    let mut voltage: Vec<f64> = (0..150)
+        .map(|i| {
+            if i == 0 {
+                0.0
+            } else if ((i - 1) / 25) % 2 == 0 {
+                6.3735
+            } else {
+                -6.3735
+            }
+        })
+        .collect();
+    voltage[15] -= code;
+    voltage[99] -= code;
+    let Input::Piecewise { times_s, volts } = voltage_input(&t, &voltage).unwrap() else {
+        panic!("replayed as samples");
+    };
+    assert_eq!(times_s.len(), 7, "{times_s:?}");
+    for (j, (&at, &v)) in times_s.iter().zip(&volts).enumerate().skip(1) {
+        let first = 1 + 25 * (j - 1);
+        assert!((at - t[first]).abs() < 1e-12, "jump {j} at {at}");
+        assert!((v.abs() - 6.3735).abs() < code, "level {j}: {v}");
+    }
+}
+
+/// A record of six levels of twenty samples after five at 0 V has one jump per twenty
+/// samples, the most a piecewise-constant voltage is read with: its first level, shorter, does
+/// not count as a jump.
+#[test]
+fn a_record_with_one_jump_per_twenty_samples_is_piecewise_constant() {
+    let dt = 1e-3;
+    let t: Vec<f64> = (0..125).map(|i| f64::from(i) * dt).collect();
+    let voltage: Vec<f64> = (0..125)
+        .map(|i| match i {
+            0..5 => 0.0,
+            _ if ((i - 5) / 20) % 2 == 0 => 9.485,
+            _ => -9.485,
+        })
+        .collect();
+    let input = voltage_input(&t, &voltage).unwrap();
+    assert!(
+        matches!(&input, Input::Piecewise { times_s, .. } if times_s.len() == 7),
+        "{input:?}"
+    );
+}

@@ -5,15 +5,15 @@
 //!
 //! The cases are all 16 of seed 1 (two `none`, two with two effects, twelve with one; about a
 //! minute and a half on two cores); the full benchmark is the `withheld_benchmark` example.
-//! The diagnosis names the right effect first on 15 of the 16: case 1's thermal drift (5
-//! floors) is named `stribeck_friction` (with the drift second). Case 0's sensor lag (a
-//! sample period, 57 noise floors beside the best nominal model) used to be named
-//! `inductance_saturation`, until each candidate was judged at its own jump instants. The
-//! floor, 0.875, allows two misses.
+//! The diagnosis names the right effect first on all 16. Case 1's thermal drift (5 floors)
+//! was named after a `stribeck_friction` until the nominal model's steps and L were fitted
+//! together; case 0's sensor lag (a sample period, 57 noise floors beside the best nominal
+//! model) was named `inductance_saturation` until each candidate was judged at its own jump
+//! instants. The floor, 0.9375, allows one miss.
 //!
 //! Two more tests diagnose one case each of the 160 that a screening or refit rule used to miss,
 //! as they were found: sized against the true nominal motor (`motor_model::withheld::
-//! benchmark_case`), before the benchmark's cases were sized on the gap; two more, one case
+//! benchmark_case`), before the benchmark's cases were sized on the gap; three more, one case
 //! each sized on the gap, that the held-out blocks and the jump instants used to miss.
 
 use fit::diagnose::benchmark::{calibrated_case, run_case, CaseOutcome, Summary};
@@ -25,7 +25,7 @@ const SEED: u64 = 1;
 /// Cases of the seed.
 const OF: usize = 16;
 /// Top-1 accuracy the diagnosis must reach on them \[-\].
-const TOP1_FLOOR: f64 = 0.875;
+const TOP1_FLOOR: f64 = 0.9375;
 
 #[test]
 fn withheld_effects_are_named_above_the_floor_and_none_raises_no_alarm() {
@@ -91,6 +91,19 @@ fn a_sensor_lag_the_nominal_fit_took_into_l_is_named_at_its_own_jump_instants() 
     // nominal model at those instants, τf ran to 1e-109 s and the verdict was `none`; from a
     // start splitting L/R between L and τf, judged at its own instants, the lag is named.
     assert_named_calibrated(11, "current_sensor_lag");
+}
+
+#[test]
+fn a_saturation_behind_a_step_the_nominal_fit_put_late_is_named_once_l_and_the_step_are_fitted_together(
+) {
+    // Case 79 of seed 1's 160, sized on the gap: an inductance saturating to 93 % above
+    // 2.2 A, 10 floors from the nominal model, on a motor whose L/R (0.74 ms) is shorter than
+    // the 1 ms sample period. Located beside the nominal model and refitted once, the steps
+    // stayed late (0.89 ms, truth 0.63 ms) and L short (1.07 mH, truth 1.88 mH); their
+    // residual at the steps' first samples set the current's weight a hundred floors high and
+    // the verdict was `none`. The reversal record, six jumps in 150 samples read without noise,
+    // was replayed as samples. The joint step puts the steps at 0.63 ms and L at 1.83 mH.
+    assert_named_calibrated(79, "inductance_saturation");
 }
 
 /// [`assert_named`] on case `index` of seed 1's 160 sized on the gap the nominal model leaves

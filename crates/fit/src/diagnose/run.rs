@@ -18,9 +18,12 @@
 //!
 //! **Voltage jumps.** The voltage column says only between which two samples a jump fell.
 //! After the nominal fit each jump is moved to the instant within that sample period where the
-//! nominal model fits its record best, the nominal model is refitted there, its jumps are
-//! located again beside the refit, and the screening projects the jumps' instants out with the
-//! motor's parameters: otherwise a step modelled up to a period late leaves a residual at every
+//! nominal model fits its record best, the nominal model is refitted there, and its jumps are
+//! located again beside the refit, in turn until no jump moves by more than 0.02 of a period
+//! (the training records' jumps each next refit is made on moved by the Gauss–Newton step of
+//! the motor and the instants together, which settles in a few rounds where alternating moves
+//! a few per cent a round); the screening projects the jumps' instants out with the motor's
+//! parameters: otherwise a step modelled up to a period late leaves a residual at every
 //! jump that an effect acting there (a sensor lag, a saturating inductance) is credited with.
 //! Every refitted candidate's jumps are located the same way beside its own model before it is
 //! judged, so that each model is compared at its own best instants (a lag's lie earlier than
@@ -566,6 +569,39 @@ const FIRST_JUMP_MARGIN: f64 = 0.02;
 /// Golden-section rounds of the search for one voltage jump's instant (the bracket, one sample
 /// period, shrinks to 0.618¹² ≈ 0.3 % of it).
 const JUMP_SEARCH_ROUNDS: usize = 12;
+/// Rounds at most of the nominal refit on located jump instants and their location again
+/// ([`diagnose`]).
+const NOMINAL_LOCATE_ROUNDS: usize = 6;
+/// Largest move of a jump between two rounds at which they stop \[sample periods\].
+const NOMINAL_LOCATE_SETTLED: f64 = 0.02;
+
+/// The largest move of a voltage jump from `before` to `after` over the records of `grid`
+/// \[sample periods of its record\]: infinite where a record's jumps cannot be compared (one
+/// input piecewise constant and the other not, or a different number of jumps).
+fn largest_jump_move(
+    before: &[Option<Input>],
+    after: &[Option<Input>],
+    grid: &[ExcitedRecord<'_>],
+) -> f64 {
+    let times = |input: Option<&Input>| {
+        let times: Vec<f64> =
+            input.map_or(Vec::new(), |i| jump_levels(i).iter().map(|l| l.0).collect());
+        (!times.is_empty()).then_some(times)
+    };
+    let mut largest: f64 = 0.0;
+    for ((b, a), r) in before.iter().zip(after).zip(grid) {
+        match (times(b.as_ref()), times(a.as_ref())) {
+            (Some(tb), Some(ta)) if tb.len() == ta.len() => {
+                for (x, y) in tb.iter().zip(&ta) {
+                    largest = largest.max((x - y).abs() / r.dt.max(f64::MIN_POSITIVE));
+                }
+            }
+            (None, None) if b == a => {}
+            _ => return f64::INFINITY,
+        }
+    }
+    largest
+}
 
 /// Record `k`'s piecewise-constant voltage with every jump moved, one after the other, to the
 /// instant within the sample period before its first sample at which `motor` fits the record
@@ -583,13 +619,10 @@ fn locate_jumps(
     sigmas: &[(usize, Channel, f64)],
     step_factor: f64,
 ) -> Option<Input> {
-    let mut levels: Vec<(f64, f64)> = match record.input {
-        Input::Piecewise { times_s, volts } => {
-            times_s.iter().copied().zip(volts.iter().copied()).collect()
-        }
-        Input::Step { volts, at_s } => vec![(*at_s, *volts)],
-        _ => return None,
-    };
+    let mut levels = jump_levels(record.input);
+    if levels.is_empty() {
+        return None;
+    }
     let dt = record.dt;
     let cost = |levels: &[(f64, f64)]| -> Option<f64> {
         let input = Input::piecewise(levels).ok()?;
@@ -618,12 +651,7 @@ fn locate_jumps(
         if t < 0.5 * dt {
             continue;
         }
-        // Half a period after the jump before, or, for the first, just after the record's
-        // start (a step on the first sample after the trigger can fall anywhere before it).
-        let lo_limit = levels
-            .get(j.wrapping_sub(1))
-            .map_or(FIRST_JUMP_MARGIN * dt, |l| l.0 + 0.5 * dt);
-        let (mut a, mut b) = ((t - dt).max(lo_limit), t);
+        let (mut a, mut b) = jump_bracket(&levels, j, dt);
         if b - a <= 0.0 {
             continue;
         }
@@ -688,12 +716,12 @@ fn record_rows(
     k: usize,
     record: &ExcitedRecord<'_>,
     input: &Input,
-    base: &Base<'_>,
+    (motor, effects): (&MotorParams, &Effects),
     sigmas: &[(usize, Channel, f64)],
     step_factor: f64,
 ) -> Option<Vec<(Channel, usize, f64, f64)>> {
     let r = ExcitedRecord { input, ..*record };
-    let fitted = predict_with_step_factor(&[r], &base.motor, &base.effects, step_factor).ok()?;
+    let fitted = predict_with_step_factor(&[r], motor, effects, step_factor).ok()?;
     let mut rows = Vec::new();
     for ch in &fitted {
         let sigma = channel_sigma(sigmas, k, ch.channel)?;
@@ -771,7 +799,14 @@ fn cogging_prefilter(
     // Each training record's rows and the base trajectory they are read along.
     let mut layouts = Vec::with_capacity(base.train.len());
     for (idx, rec) in base.train.iter().enumerate() {
-        let rows = record_rows(idx, rec, rec.input, base, sigmas, step_factor)?;
+        let rows = record_rows(
+            idx,
+            rec,
+            rec.input,
+            (&base.motor, &base.effects),
+            sigmas,
+            step_factor,
+        )?;
         let n = rec.current.len();
         let trace = motor_model::Simulator::new(*m, base.effects, rec.input.clone())
             .and_then(|s| s.with_step_factor(step_factor))
@@ -883,12 +918,53 @@ fn with_jump_columns(
     sigmas: &[(usize, Channel, f64)],
     step_factor: f64,
 ) -> DMatrix<f64> {
-    let mut rows: Vec<Vec<f64>> = Vec::with_capacity(base.train.len());
-    for (k, r) in base.train.iter().enumerate() {
-        match record_rows(k, r, r.input, base, sigmas, step_factor) {
-            Some(v) => rows.push(row_values(&v)),
-            None => return jacobian,
-        }
+    let model = (&base.motor, &base.effects);
+    let Some(columns) = jump_columns(residuals, base.train, model, sigmas, step_factor) else {
+        return jacobian;
+    };
+    if columns.is_empty() {
+        return jacobian;
+    }
+    let p = jacobian.ncols();
+    let mut out = jacobian.resize_horizontally(p + columns.len(), 0.0);
+    for (c, col) in columns.iter().enumerate() {
+        out.column_mut(p + c).copy_from_slice(&col.column);
+    }
+    out
+}
+
+/// The derivative of a record's weighted residual rows in the instant of one of its voltage
+/// jumps, taken earlier (see [`jump_columns`]).
+struct JumpColumn {
+    /// The record.
+    record: usize,
+    /// The jump, in the record's piecewise-constant levels.
+    jump: usize,
+    /// `∂ rows / ∂(−t)`, zero outside the record's rows.
+    column: Vec<f64>,
+}
+
+/// The columns of the weighted residual rows of `train` for `model` (`residuals`, as
+/// [`output_error_sensitivity`] gives them: [`record_rows`] record after record) in the instant
+/// of every voltage jump after a record's first sample, by a backward difference of
+/// [`JUMP_DIFF_STEP`] sample periods. `None` when the rows cannot be rebuilt exactly.
+fn jump_columns(
+    residuals: &[f64],
+    train: &[ExcitedRecord<'_>],
+    model: (&MotorParams, &Effects),
+    sigmas: &[(usize, Channel, f64)],
+    step_factor: f64,
+) -> Option<Vec<JumpColumn>> {
+    let mut rows: Vec<Vec<f64>> = Vec::with_capacity(train.len());
+    for (k, r) in train.iter().enumerate() {
+        rows.push(row_values(&record_rows(
+            k,
+            r,
+            r.input,
+            model,
+            sigmas,
+            step_factor,
+        )?));
     }
     let flat: Vec<f64> = rows.iter().flatten().copied().collect();
     let same = flat.len() == residuals.len()
@@ -897,28 +973,23 @@ fn with_jump_columns(
             .zip(residuals)
             .all(|(a, b)| (a - b).abs() <= 1e-6 * (1.0 + b.abs()));
     if !same {
-        return jacobian;
+        return None;
     }
-    let mut columns: Vec<Vec<f64>> = Vec::new();
+    let mut columns: Vec<JumpColumn> = Vec::new();
     let mut offset = 0;
-    for (k, r) in base.train.iter().enumerate() {
-        let levels: Vec<(f64, f64)> = match r.input {
-            Input::Piecewise { times_s, volts } => {
-                times_s.iter().copied().zip(volts.iter().copied()).collect()
-            }
-            Input::Step { volts, at_s } => vec![(*at_s, *volts)],
-            _ => Vec::new(),
-        };
+    for (k, r) in train.iter().enumerate() {
+        let levels = jump_levels(r.input);
         let h = JUMP_DIFF_STEP * r.dt;
         for j in 0..levels.len() {
-            if levels[j].0 < 0.5 * r.dt {
+            // The level a record starts at is not a jump.
+            if levels[j].0 <= 0.0 {
                 continue;
             }
             let mut shifted = levels.clone();
             shifted[j].0 -= h;
             let Some(moved) = Input::piecewise(&shifted)
                 .ok()
-                .and_then(|input| record_rows(k, r, &input, base, sigmas, step_factor))
+                .and_then(|input| record_rows(k, r, &input, model, sigmas, step_factor))
                 .map(|v| row_values(&v))
             else {
                 continue;
@@ -926,23 +997,105 @@ fn with_jump_columns(
             if moved.len() != rows[k].len() {
                 continue;
             }
-            let mut col = vec![0.0; residuals.len()];
+            let mut column = vec![0.0; residuals.len()];
             for (i, (a, b)) in moved.iter().zip(&rows[k]).enumerate() {
-                col[offset + i] = (a - b) / h;
+                column[offset + i] = (a - b) / h;
             }
-            columns.push(col);
+            columns.push(JumpColumn {
+                record: k,
+                jump: j,
+                column,
+            });
         }
         offset += rows[k].len();
     }
+    Some(columns)
+}
+
+/// Where jump `j` of `levels` (a record's voltage as the voltage column puts it, each jump on
+/// the first sample showing it) can have fallen: within the sample period before that sample,
+/// and half a period after the jump before, or, for the first, just after the record's start
+/// (a step on the first sample after the trigger can fall anywhere before it; the level a
+/// record starts at is not a jump). `(lo, hi)` \[s\]; empty when `lo ≥ hi`.
+fn jump_bracket(levels: &[(f64, f64)], j: usize, dt: f64) -> (f64, f64) {
+    let hi = levels[j].0;
+    let after = match j.checked_sub(1).and_then(|i| levels.get(i)) {
+        Some(l) if l.0 > 0.0 => l.0 + 0.5 * dt,
+        _ => FIRST_JUMP_MARGIN * dt,
+    };
+    ((hi - dt).max(after), hi)
+}
+
+/// A piecewise-constant voltage's levels `(instant [s], volts [V])`; empty for other inputs.
+fn jump_levels(input: &Input) -> Vec<(f64, f64)> {
+    match input {
+        Input::Piecewise { times_s, volts } => {
+            times_s.iter().copied().zip(volts.iter().copied()).collect()
+        }
+        Input::Step { volts, at_s } => vec![(*at_s, *volts)],
+        _ => Vec::new(),
+    }
+}
+
+/// The training records' voltage jumps moved by one Gauss–Newton step of the nominal fit of
+/// `motor` and those instants together, the motor's columns projected out
+/// ([`BaseProjection::step`]): the move that accounts for how the motor's parameters follow
+/// the instants. Locating the jumps beside a fixed model and refitting it in turn zig-zags
+/// where both change the same few samples (a step's first samples when `L/R` is near the
+/// sample period): a step late and an `L` short of the truth move each other a few per cent a
+/// round. Each jump stays within its bracket on `grid` (the sample period before the first
+/// sample showing it). `None` where the step cannot be taken (a record is returned unchanged
+/// when none of its jumps moved).
+fn jump_gauss_newton(
+    train: &[ExcitedRecord<'_>],
+    grid: &[ExcitedRecord<'_>],
+    motor: &MotorParams,
+    sigmas: &[(usize, Channel, f64)],
+    step_factor: f64,
+) -> Option<Vec<Option<Input>>> {
+    let none = Effects::none();
+    let lin = output_error_sensitivity(train, motor, &none, sigmas, None, step_factor).ok()?;
+    let columns = jump_columns(&lin.residuals, train, (motor, &none), sigmas, step_factor)?;
     if columns.is_empty() {
-        return jacobian;
+        return None;
     }
-    let p = jacobian.ncols();
-    let mut out = jacobian.resize_horizontally(p + columns.len(), 0.0);
+    let projection = BaseProjection::new(&lin.residuals, &lin.jacobian, &lin.series)?;
+    let mut signatures = DMatrix::zeros(lin.residuals.len(), columns.len());
     for (c, col) in columns.iter().enumerate() {
-        out.column_mut(p + c).copy_from_slice(col);
+        signatures.column_mut(c).copy_from_slice(&col.column);
     }
-    out
+    let step = projection.step(&signatures)?;
+    let mut levels: Vec<Vec<(f64, f64)>> = train.iter().map(|r| jump_levels(r.input)).collect();
+    for (col, delta) in columns.iter().zip(step.iter()) {
+        let (k, j) = (col.record, col.jump);
+        let (Some(r), Some(g)) = (train.get(k), grid.get(k)) else {
+            continue;
+        };
+        let bracket = jump_levels(g.input);
+        if j >= bracket.len() {
+            continue;
+        }
+        let (lo, hi) = jump_bracket(&bracket, j, r.dt);
+        // The column is the derivative in −t: the rows follow r − c·Δt.
+        let now = levels[k][j].0;
+        let moved = (now - delta).clamp(lo.min(hi), hi);
+        if moved.is_finite() {
+            levels[k][j].0 = moved;
+        }
+    }
+    Some(
+        levels
+            .iter()
+            .zip(train)
+            .map(|(l, r)| {
+                if l.is_empty() {
+                    Some(r.input.clone())
+                } else {
+                    Input::piecewise(l).ok()
+                }
+            })
+            .collect(),
+    )
 }
 
 /// `records` with record `k`'s input replaced by `inputs[k]` where that is given.
@@ -1494,23 +1647,56 @@ pub fn diagnose(
         settings.step_factor,
     );
     let train_grid = train;
-    let train: Vec<ExcitedRecord<'_>> = with_inputs(&train_grid, &located);
-    let all: Vec<ExcitedRecord<'_>> = with_inputs(&all, &located);
-    let nominal = if located.iter().any(Option::is_some) {
-        let refit = fit_nominal(&train, &nominal.params, settings, None)?;
-        // The refit on the located instants replaces the first only when it is a result too.
-        match (refit.failure(), refit.termination.converged()) {
-            (None, _) => refit,
-            (Some(_), true) if nominal_note.is_some() => refit,
-            _ => nominal,
+    // The nominal model refitted on the located instants and its jumps located again, in
+    // turn, until they stop moving. The early samples of a step tie L to the step's instant:
+    // located beside a fixed model, a step comes out late and L short, and each round moves
+    // them only a little, so the training records' jumps the refit is made on next are moved
+    // by the joint Gauss–Newton step ([`jump_gauss_newton`]) instead; the instants kept are
+    // those located beside the last refit, as every candidate's are beside its own.
+    let mut inputs = located;
+    let mut fit_at = inputs.clone();
+    let mut nominal = nominal;
+    if inputs.iter().any(Option::is_some) {
+        for _ in 0..NOMINAL_LOCATE_ROUNDS {
+            let train_now = with_inputs(&train_grid, &fit_at);
+            let refit = fit_nominal(&train_now, &nominal.params, settings, None)?;
+            // The refit on the located instants replaces the model only when it is a result
+            // too.
+            nominal = match (refit.failure(), refit.termination.converged()) {
+                (None, _) => refit,
+                (Some(_), true) if nominal_note.is_some() => refit,
+                _ => break,
+            };
+            let all_now = with_inputs(&grid, &fit_at);
+            let sigmas = channel_scales(&nominal, &predict_nominal(&all_now, &nominal.params)?);
+            inputs = located_inputs(&grid, &nominal.params, &Effects::none(), &sigmas, settings);
+            let stepped = jump_gauss_newton(
+                &train_now,
+                &grid[..train_now.len()],
+                &nominal.params,
+                &sigmas,
+                settings.step_factor,
+            );
+            let next: Vec<Option<Input>> = match stepped {
+                Some(stepped) => stepped
+                    .into_iter()
+                    .chain(inputs[train_now.len()..].iter().cloned())
+                    .collect(),
+                None => inputs.clone(),
+            };
+            let moved = largest_jump_move(&fit_at, &next, &grid);
+            fit_at = next;
+            if moved < NOMINAL_LOCATE_SETTLED {
+                break;
+            }
         }
-    } else {
-        nominal
-    };
-    // The jumps located again beside the refitted model, in its weights: a candidate's are
-    // located beside its own refit, and each model is judged at its own best instants.
-    let sigmas = channel_scales(&nominal, &predict_nominal(&all, &nominal.params)?);
-    let inputs = located_inputs(&grid, &nominal.params, &Effects::none(), &sigmas, settings);
+    }
+    // A record whose jumps could not move keeps its own.
+    let inputs: Vec<Option<Input>> = inputs
+        .into_iter()
+        .zip(&grid)
+        .map(|(moved, r)| moved.or_else(|| Some(r.input.clone())))
+        .collect();
     let train: Vec<ExcitedRecord<'_>> = with_inputs(&train_grid, &inputs);
     let all: Vec<ExcitedRecord<'_>> = with_inputs(&grid, &inputs);
     let nominal_all = predict_nominal(&all, &nominal.params)?;
@@ -2292,6 +2478,29 @@ mod tests {
     use super::*;
     use crate::output_error::voltage_input;
     use motor_model::{MeasurementModel, Record};
+
+    #[test]
+    fn a_first_jump_after_the_starting_level_is_searched_down_to_the_records_start() {
+        let dt = 1e-3;
+        // A record's voltage as its column reads it: 0 V from its start, the step on sample 1,
+        // a reversal on sample 30.
+        let levels = [(0.0, 0.0), (dt, 6.0), (30.0 * dt, -6.0)];
+        // The step can have fallen anywhere in the first sample period (it was searched only
+        // in its second half: half a period after the level at 0 s, taken for a jump).
+        let (lo, hi) = jump_bracket(&levels, 1, dt);
+        assert!((lo - FIRST_JUMP_MARGIN * dt).abs() < 1e-15, "{lo}");
+        assert_eq!(hi, dt);
+        // A later jump: within the period before its sample, half a period after the one
+        // before.
+        let (lo, hi) = jump_bracket(&levels, 2, dt);
+        assert!(
+            (lo - 29.0 * dt).abs() < 1e-15 && hi == 30.0 * dt,
+            "{lo} {hi}"
+        );
+        let close = [(0.0, 0.0), (dt, 6.0), (1.2 * dt, -6.0)];
+        let (lo, _) = jump_bracket(&close, 2, dt);
+        assert!((lo - 1.5 * dt).abs() < 1e-15, "{lo}");
+    }
 
     #[test]
     fn a_brush_knee_is_started_at_every_distinct_current_scale() {
