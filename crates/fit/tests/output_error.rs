@@ -204,3 +204,16 @@ fn a_record_with_one_jump_per_twenty_samples_is_piecewise_constant() {
         "{input:?}"
     );
 }
+
+/// A slow ramp read without noise by an 8-bit ADC, one code every 25 samples, is no staircase:
+/// it is replayed as samples. The second noise level, taken without the changes, leaves no
+/// noise, and each code would have been a level; a level found there must span four codes.
+#[test]
+fn a_slow_ramp_read_without_noise_is_replayed_not_taken_for_a_staircase() {
+    let dt = 1e-3;
+    let code = 10.0 / 256.0;
+    let t: Vec<f64> = (0..1000).map(|i| f64::from(i) * dt).collect();
+    let voltage: Vec<f64> = (0..1000).map(|i| f64::from(i / 25) * code).collect();
+    let input = voltage_input(&t, &voltage).unwrap();
+    assert!(matches!(input, Input::Sampled { .. }), "{input:?}");
+}

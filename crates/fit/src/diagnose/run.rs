@@ -20,9 +20,10 @@
 //! After the nominal fit each jump is moved to the instant within that sample period where the
 //! nominal model fits its record best, the nominal model is refitted there, and its jumps are
 //! located again beside the refit, in turn until no jump moves by more than 0.02 of a period
-//! (the training records' jumps each next refit is made on moved by the Gauss–Newton step of
-//! the motor and the instants together, which settles in a few rounds where alternating moves
-//! a few per cent a round); the screening projects the jumps' instants out with the motor's
+//! or for 6 rounds (the training records' jumps each next refit is made on moved by the
+//! Gauss–Newton step of the motor and the instants together, which settles in a few rounds
+//! where alternating moves a few per cent a round; by the located instants alone where that
+//! step cannot be taken); the screening projects the jumps' instants out with the motor's
 //! parameters: otherwise a step modelled up to a period late leaves a residual at every
 //! jump that an effect acting there (a sensor lag, a saturating inductance) is credited with.
 //! Every refitted candidate's jumps are located the same way beside its own model before it is
@@ -646,9 +647,8 @@ fn locate_jumps(
     let golden = (5f64.sqrt() - 1.0) / 2.0;
     let mut any = false;
     for j in 0..levels.len() {
-        let t = levels[j].0;
-        // Only a jump after the record's first sample has a sample period to move in.
-        if t < 0.5 * dt {
+        // The level a record starts at is not a jump.
+        if levels[j].0 <= 0.0 {
             continue;
         }
         let (mut a, mut b) = jump_bracket(&levels, j, dt);
@@ -985,8 +985,12 @@ fn jump_columns(
             if levels[j].0 <= 0.0 {
                 continue;
             }
+            // Earlier by `h`, or later where that would reach the level before (a first jump
+            // within `h` of the record's start): `sign` keeps the column `∂ rows / ∂(−t)`.
+            let before = j.checked_sub(1).map_or(0.0, |i| levels[i].0.max(0.0));
+            let sign = if levels[j].0 - h > before { 1.0 } else { -1.0 };
             let mut shifted = levels.clone();
-            shifted[j].0 -= h;
+            shifted[j].0 -= sign * h;
             let Some(moved) = Input::piecewise(&shifted)
                 .ok()
                 .and_then(|input| record_rows(k, r, &input, model, sigmas, step_factor))
@@ -999,7 +1003,7 @@ fn jump_columns(
             }
             let mut column = vec![0.0; residuals.len()];
             for (i, (a, b)) in moved.iter().zip(&rows[k]).enumerate() {
-                column[offset + i] = (a - b) / h;
+                column[offset + i] = sign * (a - b) / h;
             }
             columns.push(JumpColumn {
                 record: k,
@@ -1060,13 +1064,25 @@ fn jump_gauss_newton(
         return None;
     }
     let projection = BaseProjection::new(&lin.residuals, &lin.jacobian, &lin.series)?;
-    let mut signatures = DMatrix::zeros(lin.residuals.len(), columns.len());
-    for (c, col) in columns.iter().enumerate() {
-        signatures.column_mut(c).copy_from_slice(&col.column);
-    }
-    let step = projection.step(&signatures)?;
+    let signatures = |cols: &[&JumpColumn]| {
+        let mut m = DMatrix::zeros(lin.residuals.len(), cols.len());
+        for (c, col) in cols.iter().enumerate() {
+            m.column_mut(c).copy_from_slice(&col.column);
+        }
+        m
+    };
+    // Every jump at once; where their columns are not testable together (a jump whose samples
+    // are all held out, two jumps the records cannot tell apart), those testable alone.
+    let mut used: Vec<&JumpColumn> = columns.iter().collect();
+    let step = match projection.step(&signatures(&used)) {
+        Some(step) => step,
+        None => {
+            used.retain(|c| projection.step(&signatures(&[*c])).is_some());
+            projection.step(&signatures(&used))?
+        }
+    };
     let mut levels: Vec<Vec<(f64, f64)>> = train.iter().map(|r| jump_levels(r.input)).collect();
-    for (col, delta) in columns.iter().zip(step.iter()) {
+    for (col, delta) in used.iter().zip(step.iter()) {
         let (k, j) = (col.record, col.jump);
         let (Some(r), Some(g)) = (train.get(k), grid.get(k)) else {
             continue;
@@ -1653,13 +1669,24 @@ pub fn diagnose(
     // them only a little, so the training records' jumps the refit is made on next are moved
     // by the joint Gauss–Newton step ([`jump_gauss_newton`]) instead; the instants kept are
     // those located beside the last refit, as every candidate's are beside its own.
-    let mut inputs = located;
+    // A record whose jumps could not move keeps its own.
+    let any_moved = located.iter().any(Option::is_some);
+    let mut inputs: Vec<Option<Input>> = located
+        .into_iter()
+        .zip(&grid)
+        .map(|(moved, r)| moved.or_else(|| Some(r.input.clone())))
+        .collect();
     let mut fit_at = inputs.clone();
     let mut nominal = nominal;
-    if inputs.iter().any(Option::is_some) {
-        for _ in 0..NOMINAL_LOCATE_ROUNDS {
+    if any_moved {
+        for round in 0..NOMINAL_LOCATE_ROUNDS {
             let train_now = with_inputs(&train_grid, &fit_at);
-            let refit = fit_nominal(&train_now, &nominal.params, settings, None)?;
+            // A refit that fails after the first keeps the model of the round before.
+            let refit = match fit_nominal(&train_now, &nominal.params, settings, None) {
+                Ok(refit) => refit,
+                Err(e) if round == 0 => return Err(e.into()),
+                Err(_) => break,
+            };
             // The refit on the located instants replaces the model only when it is a result
             // too.
             nominal = match (refit.failure(), refit.termination.converged()) {
@@ -1691,12 +1718,6 @@ pub fn diagnose(
             }
         }
     }
-    // A record whose jumps could not move keeps its own.
-    let inputs: Vec<Option<Input>> = inputs
-        .into_iter()
-        .zip(&grid)
-        .map(|(moved, r)| moved.or_else(|| Some(r.input.clone())))
-        .collect();
     let train: Vec<ExcitedRecord<'_>> = with_inputs(&train_grid, &inputs);
     let all: Vec<ExcitedRecord<'_>> = with_inputs(&grid, &inputs);
     let nominal_all = predict_nominal(&all, &nominal.params)?;
