@@ -19,7 +19,7 @@ use crate::input_uncertainty::{
 };
 use crate::lm::{solve, LeastSquares, LmSettings, NormalEquations, Termination};
 use crate::parameters::{names_of, units_of, EffectEstimate, Parameters, MOTOR};
-use crate::plausibility::{assess, RecordFacts, Refusal};
+use crate::plausibility::{judge, RecordFacts, Refusal};
 use crate::stats::{
     newey_west_lags, sandwich_uncertainty, scaled_inverse, NeweyWest, SeriesLayout,
 };
@@ -156,6 +156,10 @@ pub struct FullFit {
     /// records' mean, parameters impossible for the records, no intervals); `None` for an
     /// accepted fit. See [`FullFit::accepted`].
     pub refusal: Option<Refusal>,
+    /// The refusal its motor, intervals and effect estimates alone give, no channel's NRMSE
+    /// looked at ([`crate::plausibility::judge`]): what still refuses a fit whose channel
+    /// worse than a constant a caller has reason to pass over.
+    pub(crate) refusal_beside_channels: Option<Refusal>,
     /// Final weighted cost `½ Σ r²`.
     pub cost: f64,
     /// Each record's initial state as fitted, in record order, for an output-error fit
@@ -887,6 +891,7 @@ pub(crate) fn fit_weighted_point<P: WeightedProblem>(
         iterations,
         termination: report.termination,
         refusal: None,
+        refusal_beside_channels: None,
         cost: report.normal.cost,
         initial_states: Vec::new(),
         theta,
@@ -896,7 +901,7 @@ pub(crate) fn fit_weighted_point<P: WeightedProblem>(
 }
 
 /// Sets the intervals of a fit by [`fit_weighted_point`] from `normal`, its normal equations,
-/// and judges it ([`assess`]): the Newey–West sandwich (residuals of logged signals are rarely
+/// and judges it ([`judge`]): the Newey–West sandwich (residuals of logged signals are rarely
 /// white), then the delta method through each parameter's transform back to SI units.
 pub(crate) fn attach_intervals<P: WeightedProblem>(
     problem: &P,
@@ -908,7 +913,7 @@ pub(crate) fn attach_intervals<P: WeightedProblem>(
         .and_then(|s| sandwich_uncertainty(normal, &s));
     let dof = unc.as_ref().map_or(0, |u| u.dof);
     set_intervals(fit, problem.parameters(), unc.map(|u| u.covariance), dof);
-    fit.refusal = assess(fit, &problem.facts());
+    judge(fit, &problem.facts());
 }
 
 /// Sets the intervals of `fit` (motor and effects, SI units) from the covariance of its θ

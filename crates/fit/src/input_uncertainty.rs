@@ -727,7 +727,7 @@ pub(crate) fn fit_with_inputs<P: NuisanceProblem>(
         set_intervals(&mut fit, problem.parameters(), cov, dof);
     }
     // The widened intervals are the ones reported: judge the result on them.
-    fit.refusal = crate::plausibility::assess(&fit, &problem.facts());
+    crate::plausibility::judge(&mut fit, &problem.facts());
     Ok(fit)
 }
 

@@ -134,6 +134,20 @@ pub(crate) fn assess(fit: &FullFit, facts: &RecordFacts) -> Option<Refusal> {
     )
 }
 
+/// Judges a converged fit: sets `fit.refusal` ([`assess`]) and `fit.refusal_beside_channels`,
+/// the refusal its motor, intervals and effect estimates alone give ([`assess_parts`] with no
+/// channel quality).
+pub(crate) fn judge(fit: &mut FullFit, facts: &RecordFacts) {
+    fit.refusal = assess(fit, facts);
+    fit.refusal_beside_channels = assess_parts(
+        &fit.params,
+        fit.ci95.as_ref(),
+        &fit.effect_estimates,
+        &[],
+        facts,
+    );
+}
+
 /// The reason to refuse a converged fit of `params`, if any. An effect parameter that must be
 /// positive (a time constant, a speed or current scale: [`Domain::Positive`]) is judged as a
 /// motor parameter is; an effect's size (which may be 0) or phase is reported with its

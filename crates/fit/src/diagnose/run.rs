@@ -1437,6 +1437,10 @@ fn weighted_difference(
 /// ([`absorbed_start`]).
 const LAG_SPLIT: f64 = 0.5;
 
+/// How many times the rise of [`candidate_start`]'s thermal drift a thermal drift's absorbed
+/// start ([`absorbed_start`]) heats by (the same time constant).
+const THERMAL_ABSORBED_RISE: f64 = 10.0;
+
 /// An inductance saturation's absorbed start ([`absorbed_start`]): its saturation current
 /// \[share of the training records' peak current\] and its ratio `r`.
 const SATURATION_ABSORBED: (f64, f64) = (0.3, 0.5);
@@ -1449,26 +1453,54 @@ const SATURATION_ABSORBED: (f64, f64) = (0.3, 0.5);
 ///   their time constants, which a model without the sensor gives its L/R alone);
 /// - an inductance saturation ([`SATURATION_ABSORBED`]): L0 raised so that the saturating
 ///   inductance, averaged over the training records' current weighted by how fast it moves
-///   (where L acts), is the base model's L.
+///   (where L acts), is the base model's L;
+/// - a thermal drift (`start`'s heating, [`THERMAL_ABSORBED_RISE`] times its rise): R0 lowered
+///   so that the heated resistance, averaged over the training records weighted by I² (the
+///   drop R·I squared, as the fit weighs it), is the base model's R — the base fit took a
+///   winding that heats for one at its mean temperature.
 ///
 /// `None` for the other effects, or when the motor would not be one.
 fn absorbed_start(
     kind: EffectKind,
+    start: Effect,
     motor: &MotorParams,
     records: &[ExcitedRecord<'_>],
 ) -> Option<(MotorParams, Effect)> {
-    let with_l = |l_henry: f64| {
-        MotorParams::new(
-            motor.r_ohm,
-            l_henry,
-            motor.k_nm_per_a,
-            motor.f_nms_per_rad,
-            motor.j_kgm2,
-            motor.ts_nm,
-        )
-        .ok()
-    };
+    let with = |r_ohm: f64, l_henry: f64| with_electrical(motor, r_ohm, l_henry);
+    let with_l = |l_henry: f64| with(motor.r_ohm, l_henry);
     match kind {
+        EffectKind::ThermalDrift => {
+            let Effect::ThermalDrift(heat) = start else {
+                return None;
+            };
+            let heat = ThermalDrift {
+                thermal_resistance_k_per_w: THERMAL_ABSORBED_RISE * heat.thermal_resistance_k_per_w,
+                thermal_capacity_j_per_k: heat.thermal_capacity_j_per_k / THERMAL_ABSORBED_RISE,
+                ..heat
+            };
+            let tau = heat.thermal_resistance_k_per_w * heat.thermal_capacity_j_per_k;
+            let (mut weighted, mut weight) = (0.0, 0.0);
+            for r in records {
+                // Each record starts at the ambient temperature; ΔT advanced over each sample
+                // period as the exact solution for that period's copper loss, taken in the
+                // base model's R (without the heating's own rise of R: second order here).
+                let decay = (-r.dt / tau).exp();
+                let mut rise = 0.0;
+                for &i in r.current {
+                    let factor = 1.0 + heat.alpha_per_k * rise;
+                    weighted += i * i * factor;
+                    weight += i * i;
+                    let steady = i * i * motor.r_ohm * heat.thermal_resistance_k_per_w;
+                    rise = steady + (rise - steady) * decay;
+                }
+            }
+            let mean = weighted / weight;
+            (mean.is_finite() && mean > 0.0).then_some(())?;
+            Some((
+                with(motor.r_ohm / mean, motor.l_henry)?,
+                Effect::ThermalDrift(heat),
+            ))
+        }
         EffectKind::CurrentSensorLag => Some((
             with_l(motor.l_henry * (1.0 - LAG_SPLIT))?,
             Effect::CurrentSensorLag(CurrentSensorLag {
@@ -1500,18 +1532,30 @@ fn absorbed_start(
     }
 }
 
-/// Every record's voltage with its jumps located ([`locate_jumps`]) beside `motor` with
+/// Records `which` of `grid` (entry 0 is record `which.start`) with their jumps located ([`locate_jumps`]) beside `motor` with
 /// `effects`, searched within the sample periods of `grid` (the records with their jumps where
-/// the voltage column puts them); a record whose jumps stay keeps `grid`'s. Every entry is
-/// `Some` ([`with_inputs`] then replaces every record's voltage).
+/// the voltage column puts them); a record whose jumps stay keeps `grid`'s
+/// ([`filled_from_grid`]).
 fn located_inputs(
     grid: &[ExcitedRecord<'_>],
+    which: std::ops::Range<usize>,
     motor: &MotorParams,
     effects: &Effects,
     sigmas: &[(usize, Channel, f64)],
     settings: &DiagnoseSettings,
 ) -> Vec<Option<Input>> {
-    locate_every_jump(grid, motor, effects, sigmas, settings.step_factor)
+    let located = which
+        .clone()
+        .map(|k| locate_jumps(k, &grid[k], motor, effects, sigmas, settings.step_factor))
+        .collect();
+    filled_from_grid(located, &grid[which])
+}
+
+/// `located` (one entry per record of `grid`, `None` where a record's jumps stay) with every
+/// `None` replaced by that record's own voltage: every entry `Some`, as [`with_inputs`] takes
+/// them to replace every record's voltage.
+fn filled_from_grid(located: Vec<Option<Input>>, grid: &[ExcitedRecord<'_>]) -> Vec<Option<Input>> {
+    located
         .into_iter()
         .zip(grid)
         .map(|(moved, r)| moved.or_else(|| Some(r.input.clone())))
@@ -1540,6 +1584,45 @@ fn diagnosable(refusal: &crate::Refusal, kind: Option<EffectKind>) -> bool {
         }
         _ => false,
     }
+}
+
+/// L/R \[sample periods\] a fit starts again from when the simulator refuses its start (a
+/// candidate's refit) or when it ran L/R below it (the nominal fit of [`diagnose`]).
+const SLOWEST_START_L_OVER_R: f64 = 0.5;
+
+/// `motor` with its L raised so that L/R is [`SLOWEST_START_L_OVER_R`] of the longest sample
+/// period of `records`; `None` when it is that long already (or would not be a motor).
+fn slower_electrical(motor: &MotorParams, records: &[ExcitedRecord<'_>]) -> Option<MotorParams> {
+    let dt = records.iter().map(|r| r.dt).fold(0.0, f64::max);
+    let l_henry = SLOWEST_START_L_OVER_R * dt * motor.r_ohm;
+    (l_henry > motor.l_henry).then_some(())?;
+    with_electrical(motor, motor.r_ohm, l_henry)
+}
+
+/// `motor` with R \[Ω\] and L \[H\] replaced (`None` if that is no motor).
+fn with_electrical(motor: &MotorParams, r_ohm: f64, l_henry: f64) -> Option<MotorParams> {
+    MotorParams::new(
+        r_ohm,
+        l_henry,
+        motor.k_nm_per_a,
+        motor.f_nms_per_rad,
+        motor.j_kgm2,
+        motor.ts_nm,
+    )
+    .ok()
+}
+
+/// NRMSE of a training channel at or above which the base model is taken not to explain it: a
+/// refit that leaves it worse than a constant (NRMSE above 1), but by no more than
+/// `1 − UNEXPLAINED_CHANNEL` above the base model, is not refused for it.
+const UNEXPLAINED_CHANNEL: f64 = 0.95;
+
+/// Whether a nominal fit is one the diagnosis builds on: accepted, or converged and refused
+/// only for what [`diagnosable`] allows a nominal model.
+fn usable_nominal(fit: &FullFit) -> bool {
+    fit.failure().is_none()
+        || (fit.termination.converged()
+            && fit.refusal.as_ref().is_some_and(|r| diagnosable(r, None)))
 }
 
 /// Whether a refit determines the effect's size: every fitted parameter has an interval no
@@ -1638,16 +1721,31 @@ pub fn diagnose(
         predict_with_step_factor(records, motor, &Effects::none(), settings.step_factor)
     };
     let nominal = fit_nominal(&train, start, settings, None)?;
+    // A nominal fit that ran L/R below what the records show may have stopped in a wrong
+    // minimum there (the current's rise lost, the rest bent to match): refitted from L/R at
+    // [`SLOWEST_START_L_OVER_R`] sample periods, the one with the lower training NRMSE kept.
+    let nominal = match slower_electrical(&nominal.params, &train) {
+        Some(slower) => match fit_nominal(&train, &slower, settings, None) {
+            Ok(second)
+                if usable_nominal(&second)
+                    && (!usable_nominal(&nominal)
+                        || nrmse_summary(&second.fitted, |_, _| true)
+                            < nrmse_summary(&nominal.fitted, |_, _| true)) =>
+            {
+                second
+            }
+            _ => nominal,
+        },
+        None => nominal,
+    };
     // A channel the nominal model explains worse than its mean is what an unmodelled effect
     // can do, and a motor parameter the records do not determine leaves the prediction the
     // diagnosis works on as good as any value of it would: diagnosed, and said
     // (`nominal_note`). Any other failure stops here.
-    let nominal_note = match (&nominal.refusal, nominal.failure()) {
-        (_, None) => None,
-        (Some(r), Some(_)) if nominal.termination.converged() && diagnosable(r, None) => {
-            Some(r.to_string())
-        }
-        (_, Some(why)) => return Err(DiagnoseError::NominalFailed(why)),
+    let nominal_note = match nominal.failure() {
+        None => None,
+        Some(why) if !usable_nominal(&nominal) => return Err(DiagnoseError::NominalFailed(why)),
+        Some(_) => nominal.refusal.as_ref().map(ToString::to_string),
     };
     let nominal_all = predict_nominal(&all, &nominal.params)?;
     // Each voltage jump moved to where, within its sample period, the nominal model puts it
@@ -1671,13 +1769,19 @@ pub fn diagnose(
     // those located beside the last refit, as every candidate's are beside its own.
     // A record whose jumps could not move keeps its own.
     let any_moved = located.iter().any(Option::is_some);
-    let mut inputs: Vec<Option<Input>> = located
-        .into_iter()
-        .zip(&grid)
-        .map(|(moved, r)| moved.or_else(|| Some(r.input.clone())))
-        .collect();
+    let mut inputs = filled_from_grid(located, &grid);
     let mut fit_at = inputs.clone();
     let mut nominal = nominal;
+    let n_train = train_grid.len();
+    // The last accepted round's noise scales, its validation records' located jumps, and its
+    // training records' when it located them (not when the joint step moved them): the
+    // training jumps are located once, beside the model the rounds end on.
+    struct RoundEnd {
+        sigmas: Vec<(usize, Channel, f64)>,
+        valid: Vec<Option<Input>>,
+        train_located: Option<Vec<Option<Input>>>,
+    }
+    let mut last_round: Option<RoundEnd> = None;
     if any_moved {
         for round in 0..NOMINAL_LOCATE_ROUNDS {
             let train_now = with_inputs(&train_grid, &fit_at);
@@ -1696,27 +1800,68 @@ pub fn diagnose(
             };
             let all_now = with_inputs(&grid, &fit_at);
             let sigmas = channel_scales(&nominal, &predict_nominal(&all_now, &nominal.params)?);
-            inputs = located_inputs(&grid, &nominal.params, &Effects::none(), &sigmas, settings);
-            let stepped = jump_gauss_newton(
+            let none = Effects::none();
+            let valid = located_inputs(
+                &grid,
+                n_train..grid.len(),
+                &nominal.params,
+                &none,
+                &sigmas,
+                settings,
+            );
+            let (train_next, train_located) = match jump_gauss_newton(
                 &train_now,
-                &grid[..train_now.len()],
+                &grid[..n_train],
                 &nominal.params,
                 &sigmas,
                 settings.step_factor,
-            );
-            let next: Vec<Option<Input>> = match stepped {
-                Some(stepped) => stepped
-                    .into_iter()
-                    .chain(inputs[train_now.len()..].iter().cloned())
-                    .collect(),
-                None => inputs.clone(),
+            ) {
+                Some(stepped) => (stepped, None),
+                None => {
+                    let located = located_inputs(
+                        &grid,
+                        0..n_train,
+                        &nominal.params,
+                        &none,
+                        &sigmas,
+                        settings,
+                    );
+                    (located.clone(), Some(located))
+                }
             };
+            let next: Vec<Option<Input>> = train_next
+                .into_iter()
+                .chain(valid.iter().cloned())
+                .collect();
             let moved = largest_jump_move(&fit_at, &next, &grid);
             fit_at = next;
+            last_round = Some(RoundEnd {
+                sigmas,
+                valid,
+                train_located,
+            });
             if moved < NOMINAL_LOCATE_SETTLED {
                 break;
             }
         }
+    }
+    if let Some(RoundEnd {
+        sigmas,
+        valid,
+        train_located,
+    }) = last_round
+    {
+        let train_located = train_located.unwrap_or_else(|| {
+            located_inputs(
+                &grid,
+                0..n_train,
+                &nominal.params,
+                &Effects::none(),
+                &sigmas,
+                settings,
+            )
+        });
+        inputs = train_located.into_iter().chain(valid).collect();
     }
     let train: Vec<ExcitedRecord<'_>> = with_inputs(&train_grid, &inputs);
     let all: Vec<ExcitedRecord<'_>> = with_inputs(&grid, &inputs);
@@ -2236,27 +2381,72 @@ fn run_stage(
         done: 0,
         total: refit_set.len(),
     });
+    // A refit worse than a constant on training channels the base model explains no better
+    // ([`UNEXPLAINED_CHANNEL`]: a low step's encoder speed that is mostly its counts) has not
+    // found a wrong minimum there: when every channel it is refused for is one of those and
+    // nothing else refuses it (motor, intervals, effect), the tests judge it as any other.
+    let base_as_bad = |fit: &FullFit, kind: EffectKind| {
+        let unexplained = |q: &crate::ChannelQuality| {
+            let same: Vec<FittedChannel> = base
+                .fitted
+                .iter()
+                .filter(|ch| ch.record == q.test && ch.channel == q.channel)
+                .cloned()
+                .collect();
+            let before = nrmse_summary(&same, train_mask);
+            let after = 1.0 - q.nrmse_fit_percent / 100.0;
+            before >= UNEXPLAINED_CHANNEL && after <= before + (1.0 - UNEXPLAINED_CHANNEL)
+        };
+        matches!(fit.refusal, Some(crate::Refusal::WorseThanConstant { .. }))
+            && fit
+                .quality
+                .iter()
+                .filter(|q| q.nrmse_fit_percent < 0.0)
+                .all(unexplained)
+            && fit
+                .refusal_beside_channels
+                .as_ref()
+                .is_none_or(|r| diagnosable(r, Some(kind)))
+    };
     let refit = |k: usize| -> Refit {
         let kind = kinds[k];
         // In the weights the base model was fitted and every candidate is judged in (the
         // nominal fit's channel levels): a refit reweighted by its own residuals would
         // minimise another cost than the one its likelihood-ratio test and held-out blocks
         // measure, and could trade a channel the effect does not touch for one it does.
+        // A start the simulator refuses (a time constant far below the sample period: a
+        // brush drop's film resistance or a saturating L beside an L/R already under it)
+        // starts again with L/R raised to [`SLOWEST_START_L_OVER_R`] sample periods
+        // ([`slower_electrical`]), where the records show little of it.
         let fit_on = |train: &[ExcitedRecord<'_>], motor: &MotorParams, start: Effect| {
-            fit_output_error(
-                train,
-                &[],
-                &[],
-                motor,
-                &base.effects.with(start),
-                settings.lm,
-                settings.step_factor,
-                Some(sigmas),
-            )
+            let from = |motor: &MotorParams| {
+                fit_output_error(
+                    train,
+                    &[],
+                    &[],
+                    motor,
+                    &base.effects.with(start),
+                    settings.lm,
+                    settings.step_factor,
+                    Some(sigmas),
+                )
+            };
+            match from(motor) {
+                Err(FitError::BadData { series, reason }) if series == START_SERIES => {
+                    match slower_electrical(motor, train) {
+                        Some(slower) => from(&slower),
+                        None => Err(FitError::BadData { series, reason }),
+                    }
+                }
+                other => other,
+            }
         };
         let accept = |fit: FullFit| match (&fit.refusal, fit.failure()) {
             (_, None) => Ok(fit),
-            (Some(r), Some(_)) if fit.termination.converged() && diagnosable(r, Some(kind)) => {
+            (Some(r), Some(_))
+                if fit.termination.converged()
+                    && (diagnosable(r, Some(kind)) || base_as_bad(&fit, kind)) =>
+            {
                 Ok(fit)
             }
             (_, Some(why)) => Err(why),
@@ -2265,7 +2455,14 @@ fn run_stage(
         // base model's are beside it: each model is judged at its own best instants.
         // With the effect's own part of that prediction, in noise variances.
         let judged = |fit: FullFit| {
-            let inputs = located_inputs(base.grid, &fit.params, &fit.effects, sigmas, settings);
+            let inputs = located_inputs(
+                base.grid,
+                0..base.grid.len(),
+                &fit.params,
+                &fit.effects,
+                sigmas,
+                settings,
+            );
             let all = with_inputs(base.all, &inputs);
             let predict = |effects: &Effects| {
                 predict_with_step_factor(&all, &fit.params, effects, settings.step_factor)
@@ -2292,14 +2489,16 @@ fn run_stage(
         };
         let outcome = outcome.map_err(|e| e.to_string()).and_then(accept);
         // An effect the base fit absorbed into a motor parameter (a sensor lag into L, its
-        // jumps placed late to match a current rising at once; a saturation into a mean L) is
-        // a saddle there: the effect grown alone only adds to what the parameter does. It is
-        // also refitted from a start that splits the two, on the jumps located beside that
-        // start, and the lower cost kept.
-        let outcome = match absorbed_start(kind, &base.motor, base.train) {
+        // jumps placed late to match a current rising at once; a saturation into a mean L; a
+        // heating winding into a mean R) is a saddle there: the effect grown alone only adds
+        // to what the parameter does. It is also refitted from a start that splits the two,
+        // on the jumps located beside that start, and the lower cost kept.
+        let outcome = match absorbed_start(kind, plain, &base.motor, base.train) {
             Some((motor, start)) => {
+                // The training records' alone: the split start's refit is made on them.
                 let inputs = located_inputs(
                     base.grid,
+                    0..base.train.len(),
                     &motor,
                     &base.effects.with(start),
                     sigmas,
