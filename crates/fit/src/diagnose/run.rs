@@ -1586,8 +1586,8 @@ fn diagnosable(refusal: &crate::Refusal, kind: Option<EffectKind>) -> bool {
     }
 }
 
-/// L/R \[sample periods\] a fit starts again from when the simulator refuses its start (a
-/// candidate's refit) or when it ran L/R below it (the nominal fit of [`diagnose`]).
+/// L/R \[sample periods\] the nominal fit of [`diagnose`] starts again from when it ran L/R
+/// below it.
 const SLOWEST_START_L_OVER_R: f64 = 0.5;
 
 /// `motor` with its L raised so that L/R is [`SLOWEST_START_L_OVER_R`] of the longest sample
@@ -2414,32 +2414,17 @@ fn run_stage(
         // nominal fit's channel levels): a refit reweighted by its own residuals would
         // minimise another cost than the one its likelihood-ratio test and held-out blocks
         // measure, and could trade a channel the effect does not touch for one it does.
-        // A start the simulator refuses (a time constant far below the sample period: a
-        // brush drop's film resistance or a saturating L beside an L/R already under it)
-        // starts again with L/R raised to [`SLOWEST_START_L_OVER_R`] sample periods
-        // ([`slower_electrical`]), where the records show little of it.
         let fit_on = |train: &[ExcitedRecord<'_>], motor: &MotorParams, start: Effect| {
-            let from = |motor: &MotorParams| {
-                fit_output_error(
-                    train,
-                    &[],
-                    &[],
-                    motor,
-                    &base.effects.with(start),
-                    settings.lm,
-                    settings.step_factor,
-                    Some(sigmas),
-                )
-            };
-            match from(motor) {
-                Err(FitError::BadData { series, reason }) if series == START_SERIES => {
-                    match slower_electrical(motor, train) {
-                        Some(slower) => from(&slower),
-                        None => Err(FitError::BadData { series, reason }),
-                    }
-                }
-                other => other,
-            }
+            fit_output_error(
+                train,
+                &[],
+                &[],
+                motor,
+                &base.effects.with(start),
+                settings.lm,
+                settings.step_factor,
+                Some(sigmas),
+            )
         };
         let accept = |fit: FullFit| match (&fit.refusal, fit.failure()) {
             (_, None) => Ok(fit),
