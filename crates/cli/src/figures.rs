@@ -2,6 +2,7 @@
 //! of each record, the residual beneath, from the traces the fit returns
 //! ([`fit::FullFit::fitted`]).
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::Result;
@@ -9,12 +10,24 @@ use fit::{Channel, FittedChannel, FullFit};
 
 use crate::plot::{self, Panel, Series, MEASURED, MODEL, OTHER};
 
-/// A file stem for `path` in `dir`: `dir/<file stem><suffix>_fit`.
-fn stem_in(dir: &Path, path: &str, suffix: &str) -> PathBuf {
-    let name = Path::new(path)
-        .file_stem()
-        .map_or_else(|| "record".into(), |s| s.to_string_lossy().into_owned());
-    dir.join(format!("{name}{suffix}_fit"))
+/// The name of each record's figures, in the order of `paths`: its file stem (`record` for a
+/// path without one), followed by `-2`, `-3`, ... where an earlier record already has that name
+/// (`a/r.csv` and `b/r.csv` give `r` and `r-2`), so that no record's figures replace another's.
+fn record_names<'a>(paths: impl IntoIterator<Item = &'a str>) -> Vec<String> {
+    let mut names: Vec<String> = Vec::new();
+    for path in paths {
+        let stem = Path::new(path)
+            .file_stem()
+            .map_or_else(|| "record".into(), |s| s.to_string_lossy().into_owned());
+        let mut name = stem.clone();
+        let mut k = 1;
+        while names.contains(&name) {
+            k += 1;
+            name = format!("{stem}-{k}");
+        }
+        names.push(name);
+    }
+    names
 }
 
 /// What the figures need of a record beyond the fit: its file, the time of each sample the
@@ -39,8 +52,9 @@ fn labels(channel: Channel) -> (&'static str, &'static str) {
 
 /// Figures of a fit: for each record (in the order of `records`, the fit's), the voltage if
 /// given, and for each fitted channel the measurement and the fitted model with the residual
-/// (measured − model) under it, over the samples fitted (clipped samples left out). Channels
-/// of a record fitted on different samples get a figure each.
+/// (measured − model) under it, over the samples fitted (clipped samples left out), into
+/// `dir/<record>_fit.svg` and `.png` (`<record>` from [`record_names`]). Channels of a record
+/// fitted on different samples get a figure each.
 pub fn fit_figures(
     dir: &Path,
     records: &[FigureRecord<'_>],
@@ -49,7 +63,8 @@ pub fn fit_figures(
 ) -> Result<Vec<PathBuf>> {
     crate::output::create_dir(dir)?;
     let mut written = Vec::new();
-    for (r, rec) in records.iter().enumerate() {
+    let names = record_names(records.iter().map(|r| r.path));
+    for ((r, rec), name) in records.iter().enumerate().zip(&names) {
         // Channels fitted on the same samples share a figure.
         let mut groups: Vec<Vec<&FittedChannel>> = Vec::new();
         for c in fit.fitted.iter().filter(|c| c.record == r) {
@@ -116,7 +131,8 @@ pub fn fit_figures(
                 format!("_{}", names.join("_"))
             };
             let title = format!("{}: measured and identified model", rec.path);
-            let paths = plot::time_series(&stem_in(dir, rec.path, &suffix), &title, &t, &panels)?;
+            let stem = dir.join(format!("{name}{suffix}_fit"));
+            let paths = plot::time_series(&stem, &title, &t, &panels)?;
             if !quiet {
                 for p in &paths {
                     eprintln!("wrote {}", p.display());
@@ -130,6 +146,9 @@ pub fn fit_figures(
 
 /// One residual of a diagnosis: a channel of a record before and after the chosen effect.
 pub struct ResidualFigure<'a> {
+    /// Index of its record in the order the records were given: the figures of one record
+    /// share a name ([`record_names`]).
+    pub record: usize,
     /// File it came from (names the figure).
     pub path: &'a str,
     /// The channel's name (names the figure: `current`, `speed`, `force`).
@@ -146,7 +165,8 @@ pub struct ResidualFigure<'a> {
 
 /// Figures of a diagnosis: for each record and channel, the residual of the nominal model and,
 /// when an effect is named (`named`), the residual with it, into
-/// `dir/<file stem>_<channel>_residual.svg` and `.png`.
+/// `dir/<record>_<channel>_residual.svg` and `.png` (`<record>` from [`record_names`], the
+/// records in the order given).
 pub fn residual_figures(
     dir: &Path,
     figures: &[ResidualFigure<'_>],
@@ -156,6 +176,12 @@ pub fn residual_figures(
     crate::output::create_dir(dir)?;
     let mut written = Vec::new();
     let after_label = format!("with {named}");
+    let paths: BTreeMap<usize, &str> = figures.iter().map(|f| (f.record, f.path)).collect();
+    let names: BTreeMap<usize, String> = paths
+        .keys()
+        .copied()
+        .zip(record_names(paths.values().copied()))
+        .collect();
     for f in figures {
         let mut series = vec![Series {
             label: "nominal model",
@@ -176,10 +202,11 @@ pub fn residual_figures(
             ),
             None => format!("{}: {} residual (no effect named)", f.path, f.channel),
         };
-        let name = Path::new(f.path)
-            .file_stem()
-            .map_or_else(|| "record".into(), |s| s.to_string_lossy().into_owned());
-        let stem = dir.join(format!("{name}_{}_residual", f.channel.replace(' ', "_")));
+        let stem = dir.join(format!(
+            "{}_{}_residual",
+            names[&f.record],
+            f.channel.replace(' ', "_")
+        ));
         let paths = plot::time_series(
             &stem,
             &title,
@@ -223,6 +250,7 @@ pub fn channel_residuals<'a>(
                     .map(|a| plot::residual(&a.measured, &a.model))
             });
             Some(ResidualFigure {
+                record: b.record,
                 path: rec.path,
                 channel: b.channel.name(),
                 y_label: labels(b.channel).1,
@@ -232,4 +260,15 @@ pub fn channel_residuals<'a>(
             })
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn records_of_the_same_file_name_are_numbered_in_order() {
+        let names = record_names(["a/r.csv", "b/r.csv", "r-2.csv", "c/r.csv", "/"]);
+        assert_eq!(names, ["r", "r-2", "r-2-2", "r-3", "record"]);
+    }
 }

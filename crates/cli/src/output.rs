@@ -14,6 +14,10 @@
 //! - a character or block device, a FIFO, or an open descriptor (`/dev/stdout`, `/dev/fd/N`):
 //!   opened and written directly (streamed), with no temporary file and no rename.
 //! - a directory or a socket: refused as bad input (exit code 2).
+//!
+//! A command's report goes to standard output through [`outln!`], which returns a failure to
+//! write (a full disk, a closed descriptor) as an error instead of panicking as `println!`
+//! does; a reader that goes away (`| head`) still ends the process quietly by SIGPIPE.
 
 use std::ffi::OsString;
 use std::fs::{File, OpenOptions, Permissions};
@@ -27,6 +31,28 @@ use crate::BadInput;
 
 /// Symbolic links followed before giving up: Linux's own limit for one path (ELOOP).
 const MAX_LINKS: usize = 40;
+
+/// The context of every failed write to standard output.
+const STDOUT_FAILED: &str = "cannot write to standard output";
+
+/// Writes `args` and a newline to standard output and flushes it; a failure is an error
+/// (`cannot write to standard output: No space left on device (os error 28)`), not a panic.
+/// Called through [`outln!`].
+pub fn stdout_line(args: std::fmt::Arguments<'_>) -> Result<()> {
+    let mut out = std::io::stdout().lock();
+    out.write_fmt(format_args!("{args}\n"))
+        .and_then(|()| out.flush())
+        .context(STDOUT_FAILED)
+}
+
+/// `println!` that returns `anyhow::Result<()>` instead of panicking when standard output
+/// cannot be written: `outln!("{x} V")?;` ([`stdout_line`]).
+macro_rules! outln {
+    ($($arg:tt)*) => {
+        $crate::output::stdout_line(format_args!($($arg)*))
+    };
+}
+pub(crate) use outln;
 
 /// An output path named on the command line, for [`check`].
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -82,7 +108,7 @@ pub fn write_with(path: &Path, body: impl FnOnce(&mut dyn Write) -> Result<()>) 
             let mut out = BufWriter::new(std::io::stdout().lock());
             body(&mut out)
                 .and_then(|()| Ok(out.flush()?))
-                .context("cannot write to standard output")
+                .context(STDOUT_FAILED)
         }
         Target::Direct(file) => {
             let file = crate::fifo::open_write(&file)

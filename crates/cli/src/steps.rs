@@ -190,9 +190,14 @@ fn judge_record_clipping(shown: &str, loaded: &Loaded) -> (Vec<String>, Result<C
 /// Reads `path`, finds the step and keeps the samples from it on; clipped samples are left out
 /// of the fits (and a record with too many is refused).
 pub fn load_step(path: &Path, map: &ColumnMap, quiet: bool) -> Result<LoadedStep> {
-    let (warnings, step) = read_step(path, map);
-    warn(&warnings, quiet);
-    step
+    step_from(path, read_loaded(path, map, true)?, quiet)
+}
+
+/// A step record read from `path` ([`load_step`]): the step found, clipped samples judged (and,
+/// unless `quiet`, warned about). With [`excited_from`], one read of a file gives both views
+/// (a pipe or `/dev/stdin` can be read only once).
+pub fn step_from(path: &Path, loaded: Loaded, quiet: bool) -> Result<LoadedStep> {
+    load_step_given(judge_step(path, loaded), quiet)
 }
 
 /// [`load_step`] of a high- and a low-voltage record, the two read at once (each on a core of
@@ -214,7 +219,8 @@ pub fn load_step_pair(
     Ok((high, load_step_given(low, quiet)?))
 }
 
-/// The step of a [`read_step`] result, its warnings written first (unless `quiet`).
+/// The step of a [`read_step`] or [`judge_step`] result, its warnings written first (unless
+/// `quiet`).
 fn load_step_given(
     (warnings, step): (Vec<String>, Result<LoadedStep>),
     quiet: bool,
@@ -226,11 +232,15 @@ fn load_step_given(
 /// [`load_step`] without writing: the clipping warnings (given before any error that follows
 /// them) and the step or the error.
 fn read_step(path: &Path, map: &ColumnMap) -> (Vec<String>, Result<LoadedStep>) {
+    match read_loaded(path, map, true) {
+        Ok(loaded) => judge_step(path, loaded),
+        Err(e) => (Vec::new(), Err(e)),
+    }
+}
+
+/// [`read_step`] of a record already read from `path`.
+fn judge_step(path: &Path, loaded: Loaded) -> (Vec<String>, Result<LoadedStep>) {
     let shown = path.display().to_string();
-    let loaded = match read_loaded(path, map, true) {
-        Ok(loaded) => loaded,
-        Err(e) => return (Vec::new(), Err(e)),
-    };
     let (warnings, masks) = judge_record_clipping(&shown, &loaded);
     let step = masks.and_then(|masks| {
         let label = file_lines(&shown, &loaded.lines);

@@ -1,10 +1,10 @@
 //! `motorid diagnose` end to end: a simulated servo with a withheld effect is diagnosed as that
-//! effect with its size inside its interval; the nominal servo as `none`; bad input is refused
-//! with exit 2.
+//! effect with its size inside its interval; the nominal servo as `none`; a record on standard
+//! input serves as a file does; bad input is refused with exit 2.
 
 mod common;
 
-use common::{assert_bad_input, motorid, scratch, small_servo_steps, stderr, stdout};
+use common::{assert_bad_input, motorid, motorid_fed, scratch, small_servo_steps, stderr, stdout};
 
 fn diagnose_json(high: &str, low: &str) -> serde_json::Value {
     let out = motorid(&[
@@ -65,6 +65,56 @@ fn the_nominal_servo_is_diagnosed_as_none() {
 }
 
 #[test]
+fn no_effect_named_on_a_nominal_model_that_is_not_a_result_exits_3() {
+    // A servo whose viscous friction is 1e-12 N·m·s/rad: the nominal fit runs f to zero, where
+    // no interval can be computed (as `identify` refuses it), and no effect is named. The
+    // report is printed, and the verdict `none` is refused with the reason: exit 3.
+    let dir = scratch("diagnose_not_a_result");
+    let motor = dir.join("m.json");
+    std::fs::write(
+        &motor,
+        r#"{"R":2.0,"L":0.002,"k":0.05,"f":1e-12,"J":2e-5,"Ts":0.004}"#,
+    )
+    .unwrap();
+    let paths = [("12", "1"), ("3", "2")].map(|(volts, seed)| {
+        let path = dir.join(format!("s{volts}.csv"));
+        common::simulate_to(
+            &path,
+            &[
+                "--motor",
+                motor.to_str().unwrap(),
+                "--voltage",
+                volts,
+                "--duration",
+                "0.3",
+                "--rate",
+                "2000",
+                "--adc-bits",
+                "12",
+                "--noise-lsb",
+                "1",
+                "--seed",
+                seed,
+                "--quiet",
+            ],
+        );
+        path.to_str().unwrap().to_string()
+    });
+    let out = motorid(&["diagnose", "--high", &paths[0], "--low", &paths[1]]);
+    assert_eq!(out.status.code(), Some(3), "{}", stderr(&out));
+    assert!(
+        stdout(&out).starts_with("Verdict: none"),
+        "{}",
+        stdout(&out)
+    );
+    assert!(
+        stderr(&out).contains("the nominal model is not a result (f went to"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
 fn bad_input_is_refused_naming_the_file() {
     assert_bad_input(&["diagnose"], "diagnose needs records");
     assert_bad_input(
@@ -85,6 +135,145 @@ fn bad_input_is_refused_naming_the_file() {
         ],
         "unknown effect `wind`",
     );
+}
+
+#[test]
+fn a_candidate_named_twice_is_refused() {
+    let dir = scratch("diagnose_twice");
+    let [high, low] = small_servo_steps(&dir, None);
+    assert_bad_input(
+        &[
+            "diagnose",
+            "--high",
+            &high,
+            "--low",
+            &low,
+            "--candidates",
+            "quadratic_drag, brush_drop,quadratic_drag",
+        ],
+        "--candidates: `quadratic_drag` is named twice",
+    );
+}
+
+#[test]
+fn a_training_record_given_as_held_out_data_is_refused() {
+    let dir = scratch("diagnose_heldout");
+    let [high, low] = small_servo_steps(&dir, None);
+    let held_out = "held-out data must differ from training data";
+    // The same file by another path: compared as canonical paths.
+    let other_path = dir.join(".").join("s3.csv");
+    let other_path = other_path.to_str().unwrap();
+    assert_bad_input(
+        &[
+            "diagnose",
+            "--high",
+            &high,
+            "--low",
+            &low,
+            "--validate",
+            other_path,
+        ],
+        &format!("--validate {other_path}: the same file as --low {low}; {held_out}"),
+    );
+    #[cfg(unix)]
+    {
+        let link = dir.join("link.csv");
+        std::os::unix::fs::symlink(&high, &link).unwrap();
+        let link = link.to_str().unwrap();
+        assert_bad_input(
+            &["diagnose", "--record", &high, "--validate", link],
+            &format!("--validate {link}: the same file as --record {high}"),
+        );
+    }
+    // A path that does not resolve: compared as given, before it is read.
+    assert_bad_input(
+        &[
+            "diagnose",
+            "--record",
+            "no-such.csv",
+            "--validate",
+            "no-such.csv",
+        ],
+        &format!("--validate no-such.csv: the same file as --record no-such.csv; {held_out}"),
+    );
+    assert_bad_input(
+        &[
+            "diagnose",
+            "--input",
+            "current",
+            "--torque-constant",
+            "0.05",
+            "--record",
+            &low,
+            "--validate",
+            other_path,
+        ],
+        held_out,
+    );
+}
+
+/// `a/r.csv` and `b/r.csv` under `--plot` of `diagnose` (and of `identify`): each record's
+/// figures under a name of its own (`r`, then `r-2`), none replacing the other's.
+#[test]
+fn records_of_the_same_file_name_get_figures_of_their_own() {
+    let dir = scratch("diagnose_same_name");
+    let [high, low] = small_servo_steps(&dir, None);
+    let [a, b] = ["a", "b"].map(|sub| {
+        std::fs::create_dir(dir.join(sub)).unwrap();
+        dir.join(sub).join("r.csv").to_str().unwrap().to_string()
+    });
+    std::fs::rename(&high, &a).unwrap();
+    std::fs::rename(&low, &b).unwrap();
+    let plot = dir.join("figures");
+    let out = motorid(&[
+        "diagnose",
+        "--high",
+        &a,
+        "--low",
+        &b,
+        "--candidates",
+        "quadratic_drag",
+        "--max-effects",
+        "1",
+        "--plot",
+        plot.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    for (name, record) in [("r", &a), ("r-2", &b)] {
+        let figure = plot.join(format!("{name}_current_residual.svg"));
+        let svg = std::fs::read_to_string(&figure).unwrap();
+        assert!(
+            svg.contains(&format!("{record}: current residual")),
+            "{} is not the figure of {record}",
+            figure.display()
+        );
+        assert!(plot.join(format!("{name}_current_residual.png")).is_file());
+        assert!(
+            stderr(&out).contains(&format!("wrote {}", figure.display())),
+            "{}",
+            stderr(&out)
+        );
+    }
+    // `identify --plot` names its figures the same way.
+    let fits = dir.join("fits");
+    let out = motorid(&[
+        "identify",
+        "--high",
+        &a,
+        "--low",
+        &b,
+        "--quiet",
+        "--plot",
+        fits.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    for (name, record) in [("r", &a), ("r-2", &b)] {
+        let svg = std::fs::read_to_string(fits.join(format!("{name}_fit.svg"))).unwrap();
+        assert!(
+            svg.contains(record.as_str()),
+            "{name}_fit.svg is not {record}'s"
+        );
+    }
 }
 
 /// A withheld drag that a Stribeck friction explains as well on these two steps: the verdict is
@@ -179,4 +368,38 @@ fn a_step_pair_the_paper_method_cannot_read_is_still_diagnosed() {
     assert!(out.status.success(), "{}", stderr(&out));
     let report: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
     assert_eq!(report["verdict"], "brush_drop", "{report:#}");
+}
+
+/// `diagnose --high /dev/stdin` fed through a pipe: the high step is read once, for the
+/// training records and the paper's start alike (read twice, the second read found the pipe
+/// empty: "no header row"), and the report is the one of the file itself.
+#[cfg(unix)]
+#[test]
+fn a_high_step_on_standard_input_is_diagnosed_as_its_file_is() {
+    let dir = scratch("diagnose_stdin");
+    let [high, low] = small_servo_steps(&dir, None);
+    let options = [
+        "--candidates",
+        "quadratic_drag",
+        "--max-effects",
+        "1",
+        "--json",
+        "--quiet",
+    ];
+    let from_file =
+        motorid(&[&["diagnose", "--high", &high, "--low", &low][..], &options].concat());
+    assert!(from_file.status.success(), "{}", stderr(&from_file));
+    let piped = motorid_fed(
+        &[
+            &["diagnose", "--high", "/dev/stdin", "--low", &low][..],
+            &options,
+        ]
+        .concat(),
+        std::fs::read(&high).unwrap(),
+    );
+    assert!(piped.status.success(), "{}", stderr(&piped));
+    assert_eq!(
+        stdout(&piped),
+        stdout(&from_file).replace(&high, "/dev/stdin")
+    );
 }

@@ -2,7 +2,8 @@
 //! and 2). A symbolic link is followed and stays a link; a FIFO or a device node is written in
 //! place and stays what it was; a write that fails (`/dev/full`, a full file system) or is
 //! stopped by a signal leaves the old file and no temporary file; bad paths are refused before
-//! any work starts.
+//! any work starts. A report that cannot be written to standard output is an error, not a
+//! panic.
 #![cfg(unix)]
 
 mod common;
@@ -13,7 +14,8 @@ use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use common::{
-    assert_bad_input, c_path, make_fifo, make_null_device, motorid, scratch, stderr, stdout,
+    assert_bad_input, c_path, make_fifo, make_null_device, motorid, motorid_to, scratch,
+    small_servo_steps, stderr, stdout,
 };
 
 /// `simulate` of a 1 V step for `duration` seconds at 1 kHz to `path`.
@@ -192,6 +194,52 @@ fn dev_full_reports_the_full_disk_and_stays_a_device() {
         "a temporary file was left in {}",
         folder.display()
     );
+}
+
+#[test]
+fn a_report_to_a_full_standard_output_is_an_error_not_a_panic() {
+    if !Path::new("/dev/full").exists() {
+        eprintln!("skipped: no /dev/full here");
+        return;
+    }
+    let dir = scratch("stdout-full");
+    let [high, low] = small_servo_steps(&dir, None);
+    let diagnose = [
+        "diagnose",
+        "--high",
+        &high,
+        "--low",
+        &low,
+        "--candidates",
+        "quadratic_drag",
+        "--max-effects",
+        "1",
+        "--quiet",
+    ];
+    let commands = [
+        diagnose.to_vec(),
+        [&diagnose[..], &["--json"]].concat(),
+        vec!["identify", "--high", &high, "--low", &low, "--quiet"],
+        vec!["model", "--motor", "../../fixtures/motors/small_servo.json"],
+        vec!["model", "--motor", "paper", "--json"],
+    ];
+    for args in commands {
+        let full = std::fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/full")
+            .unwrap();
+        let out = motorid_to(&args, Stdio::from(full));
+        let err = stderr(&out);
+        assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        assert!(
+            err.lines().any(
+                |l| l.starts_with("error: cannot write to standard output: ")
+                    && l.contains("No space left on device")
+            ),
+            "{args:?}: {err}"
+        );
+    }
 }
 
 /// A tmpfs mounted for the test, unmounted when dropped.

@@ -12,6 +12,7 @@ use motor_model::{
 };
 
 use crate::args::DemoArgs;
+use crate::output::outln;
 use crate::paper_values::{
     compare, HIGH_VOLTAGE_V, LOGGER_RATE_HZ, LOW_VOLTAGE_V, TABLE_1, TABLE_2, TEST_LENGTH_S,
 };
@@ -45,8 +46,8 @@ impl Settings {
 pub fn run(a: &Settings) -> Result<()> {
     let motor = MotorParams::paper();
     let d = Derived::new(&motor);
-    println!("motorid demo — the simulated motor of the paper's Sec. 4.1");
-    println!(
+    outln!("motorid demo — the simulated motor of the paper's Sec. 4.1")?;
+    outln!(
         "R = {} ohm, L = {} H, k = {} N·m/A, f = {} N·m·s/rad, J = {} kg·m², Ts = {} N·m\n",
         motor.r_ohm,
         motor.l_henry,
@@ -54,13 +55,16 @@ pub fn run(a: &Settings) -> Result<()> {
         motor.f_nms_per_rad,
         motor.j_kgm2,
         motor.ts_nm
-    );
+    )?;
 
-    println!("Table 1 — derived constants, Eqs. (16)-(26)");
-    println!(
+    outln!("Table 1 — derived constants, Eqs. (16)-(26)")?;
+    outln!(
         "  {:<6} {:>12} {:>12}    {:<8}",
-        "", "motorid", "paper", "unit"
-    );
+        "",
+        "motorid",
+        "paper",
+        "unit"
+    )?;
     let ours = |key: &str| match key {
         "KE" => d.k_e,
         "Ks" => d.k_s,
@@ -81,13 +85,13 @@ pub fn run(a: &Settings) -> Result<()> {
         } else {
             ""
         };
-        println!(
+        outln!(
             "  {key:<6} {text:>12} {} {printed:<10} {unit:<8}{note}",
             mark(same)
-        );
+        )?;
     }
 
-    println!("\nTable 2 — values at t = {TEST_LENGTH_S} s (exact response; RK4 stick-slip simulation beside it)");
+    outln!("\nTable 2 — values at t = {TEST_LENGTH_S} s (exact response; RK4 stick-slip simulation beside it)")?;
     let mut records = Vec::new();
     for (e, rows) in [
         (HIGH_VOLTAGE_V, &TABLE_2[0..2]),
@@ -105,20 +109,20 @@ pub fn run(a: &Settings) -> Result<()> {
                 (exact.speed_rad_s, sim.speed[last])
             };
             let (text, same) = compare(value, printed);
-            println!(
+            outln!(
                 "  {test:<11} {qty:<3} {text:>9} {} {printed:<7} {unit:<6} (exact {value:.6}, simulated {simulated:.6})",
                 mark(same)
-            );
+            )?;
         }
         records.push((e, input, sim));
     }
     let t0_high = StepResponse::new(&motor, HIGH_VOLTAGE_V).breakaway_time();
     let t0_low = StepResponse::new(&motor, LOW_VOLTAGE_V).breakaway_time();
-    println!(
+    outln!(
         "\nBreakaway, Eq. (11): t0 = {:.4} ms at {HIGH_VOLTAGE_V} V, {:.4} ms at {LOW_VOLTAGE_V} V",
         t0_high.unwrap_or(f64::NAN) * 1e3,
         t0_low.unwrap_or(f64::NAN) * 1e3
-    );
+    )?;
     identification_story(&motor, &records)?;
     diagnosis_story()?;
 
@@ -128,7 +132,7 @@ pub fn run(a: &Settings) -> Result<()> {
             let record = motor_model::MeasurementModel::default().apply(&trace)?;
             let path = dir.join(format!("paper_{e}V.csv"));
             record_csv::write_file(&path, &record, &metadata(&motor, &Effects::none(), &input))?;
-            println!("wrote {}", path.display());
+            outln!("wrote {}", path.display())?;
         }
     }
     Ok(())
@@ -150,9 +154,9 @@ fn identification_story(motor: &MotorParams, records: &[(f64, Input, Trace)]) ->
     let settings = LmSettings::default();
     let paper = identify_paper(&tests[0], &tests[1], settings)?;
     let t3 = paper.fit_33.params;
-    println!(
+    outln!(
         "\nTable 3 — the paper's fit of Eq. (33) to the normalised 40 V current (start 1, 1, 1)"
-    );
+    )?;
     for (name, value, printed) in [
         ("alpha", t3.alpha, "4.9832"),
         ("sigma", t3.sigma, "0.5237"),
@@ -164,10 +168,10 @@ fn identification_story(motor: &MotorParams, records: &[(f64, Input, Trace)]) ->
         } else {
             ""
         };
-        println!(
+        outln!(
             "  {name:<6} {text:>9} {} {printed:<8} (full {value:.6}){note}",
             mark(same)
-        );
+        )?;
     }
     // Table 4 from the paper's own rounded inputs, and from ours at full precision.
     let rounded = from_high_voltage(
@@ -181,11 +185,14 @@ fn identification_story(motor: &MotorParams, records: &[(f64, Input, Trace)]) ->
         159.6,
     )?;
     let h = &paper.high;
-    println!("\nTable 4 — Eqs. (34)-(44), Eq. (37) corrected (docs/errata.md E8)");
-    println!(
+    outln!("\nTable 4 — Eqs. (34)-(44), Eq. (37) corrected (docs/errata.md E8)")?;
+    outln!(
         "  {:<6} {:>10} {:>12} {:>10}",
-        "", "paper", "rounded in", "full prec."
-    );
+        "",
+        "paper",
+        "rounded in",
+        "full prec."
+    )?;
     let rows = [
         ("wn", "0.3542", rounded.omega_n, h.omega_n),
         ("zeta", "1.4788", rounded.zeta, h.zeta),
@@ -201,20 +208,20 @@ fn identification_story(motor: &MotorParams, records: &[(f64, Input, Trace)]) ->
     for (name, printed, from_rounded, full) in rows {
         let (r_text, _) = compare(from_rounded, printed);
         let (f_text, _) = compare(full, printed);
-        println!("  {name:<6} {printed:>10} {r_text:>12} {f_text:>10}");
+        outln!("  {name:<6} {printed:>10} {r_text:>12} {f_text:>10}")?;
     }
-    println!(
+    outln!(
         "  Ts (48) = {:.4} N·m (paper 0.0299), KE (50) = {:.4} A/V (paper 1.3363), Ks (51) = {:.4} A/(N·m) (paper 3.9950)",
         paper.low.ts_nm, paper.low.k_e, paper.low.k_s
-    );
+    )?;
 
     let full = identify_full(&tests, &paper.params, settings)?;
-    println!(
+    outln!(
         "\nFull model — R, L, k, f, J, Ts fitted jointly to both records with the exact response"
-    );
-    print_errors(motor, &paper, &full);
+    )?;
+    print_errors(motor, &paper, &full)?;
 
-    println!("\nThrough the paper's logger — 10-bit ADC, 1 LSB noise, 2000-count encoder, speed from the encoder");
+    outln!("\nThrough the paper's logger — 10-bit ADC, 1 LSB noise, 2000-count encoder, speed from the encoder")?;
     let logger = Logger::paper(TEST_LENGTH_S, LOGGER_RATE_HZ);
     let (hv, lv) = (
         record(&logger, motor, HIGH_VOLTAGE_V, 1)?,
@@ -223,16 +230,21 @@ fn identification_story(motor: &MotorParams, records: &[(f64, Input, Trace)]) ->
     let noisy = [hv.test(), lv.test()];
     let paper_noisy = identify_paper(&noisy[0], &noisy[1], settings)?;
     let full_noisy = identify_full(&noisy, &paper_noisy.params, settings)?;
-    print_errors(motor, &paper_noisy, &full_noisy);
-    println!("  (errors and 95% CI coverage over many such records: motorid montecarlo)");
+    print_errors(motor, &paper_noisy, &full_noisy)?;
+    outln!("  (errors and 95% CI coverage over many such records: motorid montecarlo)")?;
     Ok(())
 }
 
-fn print_errors(motor: &MotorParams, paper: &PaperIdentification, full: &FullFit) {
-    println!(
+/// The errors of the paper's method and of the full fit against the true `motor`, and whether
+/// each full 95 % interval contains the truth.
+fn print_errors(motor: &MotorParams, paper: &PaperIdentification, full: &FullFit) -> Result<()> {
+    outln!(
         "  {:<3} {:>9} {:>15} {:>15}   full 95% CI contains truth",
-        "", "truth", "paper (error)", "full (rel. err)"
-    );
+        "",
+        "truth",
+        "paper (error)",
+        "full (rel. err)"
+    )?;
     let paper_errors = accuracy(&paper.params, None, motor);
     let full_errors = accuracy(&full.params, full.ci95.as_ref(), motor);
     for (p, f) in paper_errors.iter().zip(&full_errors) {
@@ -241,19 +253,19 @@ fn print_errors(motor: &MotorParams, paper: &PaperIdentification, full: &FullFit
             Some(true) => "yes",
             Some(false) => "no",
         };
-        println!(
+        outln!(
             "  {:<3} {:>9} {:>+14.4}% {:>+14.2e}    {covered}",
             p.name,
             p.truth,
             100.0 * p.relative_error,
             f.relative_error,
-        );
+        )?;
     }
-    println!(
+    outln!(
         "  full fit: {} after {} iterations",
         full.termination.text(),
         full.iterations
-    );
+    )
 }
 
 /// The small servo of `fixtures/motors/small_servo.json` (R 2 Ω, L 2 mH, k 0.05 N·m/A,
@@ -271,9 +283,9 @@ fn diagnosis_story() -> Result<()> {
     let motor = small_servo()?;
     let withheld =
         Effects::none().with(format!("brush_drop:vb={WITHHELD_BRUSH_DROP_V}").parse::<Effect>()?);
-    println!(
+    outln!(
         "\nDiagnosis — a small servo with a {WITHHELD_BRUSH_DROP_V} V brush drop the model does not know, 12 V and 3 V steps of 0.6 s at 5 kHz through the logger"
-    );
+    )?;
     let mut steps = Vec::new();
     for (seed, volts) in [(1, 12.0), (2, 3.0)] {
         let trace =
@@ -314,19 +326,19 @@ fn diagnosis_story() -> Result<()> {
                     ),
                     None => format!(", {} = {:.4} {}", p.symbol, p.value, p.unit),
                 });
-            println!("  verdict: {name}{size}");
+            outln!("  verdict: {name}{size}")?;
             if let Some(c) = c {
-                println!(
+                outln!(
                     "  held-out NRMSE {:.4} → {:.4} with it (training {:.4} → {:.4})",
                     c.heldout_nrmse_before,
                     c.heldout_nrmse_after,
                     c.train_nrmse_before,
                     c.train_nrmse_after
-                );
+                )?;
             }
         }
-        _ => println!("  verdict: none — no candidate effect improves the held-out data"),
+        _ => outln!("  verdict: none — no candidate effect improves the held-out data")?,
     }
-    println!("  (the whole report, its localisation and figures: motorid diagnose)");
+    outln!("  (the whole report, its localisation and figures: motorid diagnose)")?;
     Ok(())
 }

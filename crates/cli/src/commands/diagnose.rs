@@ -1,6 +1,6 @@
 //! `motorid diagnose`: reads the records, calls `fit::diagnose`, prints the verdict.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Result;
@@ -15,15 +15,17 @@ use serde_json::json;
 
 use crate::args::{AxisArg, DiagnoseArgs, DriveArg};
 use crate::figures::{FigureRecord, ResidualFigure};
-use crate::record_csv::ColumnMap;
-use crate::steps::{identify_pair, in_order, load_excited, load_step, LoadedExcited};
+use crate::output::outln;
+use crate::record_csv::{read_loaded, ColumnMap};
+use crate::steps::{excited_from, identify_pair, in_order, load_excited, step_from, LoadedExcited};
 use crate::{BadInput, NotConverged};
 
 /// The command's settings, validated from its arguments ([`settings`]).
 pub struct Settings {
-    /// The step pair, when given (`--high`, `--low`): the nominal fit starts from its
-    /// identification.
-    pair: Option<(PathBuf, PathBuf)>,
+    /// Whether the first two training records are a step pair (`--high`, `--low`): the
+    /// nominal fit starts from its identification.
+    pair: bool,
+    /// The training records: the step pair first, if any, then the `--record` files.
     training: Vec<PathBuf>,
     validation: Vec<PathBuf>,
     columns: ColumnMap,
@@ -43,23 +45,61 @@ struct CurrentDrive {
     inverse: InverseDiagnoseSettings,
 }
 
-/// The `--candidates` list, parsed (default: every effect).
+/// The `--candidates` list, parsed (default: every effect); an effect named twice is refused.
 fn candidates(a: &DiagnoseArgs) -> Result<Vec<EffectKind>> {
     if a.candidates.is_empty() {
         return Ok(EffectKind::ALL.to_vec());
     }
-    a.candidates
+    let mut kinds = Vec::with_capacity(a.candidates.len());
+    for c in &a.candidates {
+        let kind = c.trim().parse::<EffectKind>().map_err(|_| {
+            BadInput(format!(
+                "--candidates: unknown effect `{c}`; known: {}",
+                EffectKind::ALL.map(EffectKind::name).join(", ")
+            ))
+        })?;
+        if kinds.contains(&kind) {
+            return Err(BadInput(format!(
+                "--candidates: `{}` is named twice; name each effect once",
+                kind.name()
+            ))
+            .into());
+        }
+        kinds.push(kind);
+    }
+    Ok(kinds)
+}
+
+/// Whether `a` and `b` name the same file: their canonical paths where both resolve (links,
+/// `./`, `..`), else the paths as given (`/dev/stdin` twice).
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => a == b,
+    }
+}
+
+/// Refuses a `--validate` record that is also a training record (`--high`, `--low`,
+/// `--record`): judged on data it was fitted to, a candidate would look better than it is.
+fn held_out_differs(a: &DiagnoseArgs) -> Result<()> {
+    let training: Vec<(&str, &PathBuf)> = a
+        .high
         .iter()
-        .map(|c| {
-            c.trim().parse::<EffectKind>().map_err(|_| {
-                BadInput(format!(
-                    "--candidates: unknown effect `{c}`; known: {}",
-                    EffectKind::ALL.map(EffectKind::name).join(", ")
-                ))
-                .into()
-            })
-        })
-        .collect()
+        .map(|p| ("--high", p))
+        .chain(a.low.iter().map(|p| ("--low", p)))
+        .chain(a.records.iter().map(|p| ("--record", p)))
+        .collect();
+    for held_out in &a.validate {
+        if let Some((flag, path)) = training.iter().find(|(_, p)| same_file(p, held_out)) {
+            return Err(BadInput(format!(
+                "--validate {}: the same file as {flag} {}; held-out data must differ from training data: give a record not used for training",
+                held_out.display(),
+                path.display()
+            ))
+            .into());
+        }
+    }
+    Ok(())
 }
 
 /// Validates `a` into [`Settings`]: exit 2 with what to fix.
@@ -76,6 +116,7 @@ pub fn settings(a: &DiagnoseArgs) -> Result<Settings> {
         )
         .into());
     }
+    held_out_differs(a)?;
     let candidates = candidates(a)?;
     if a.max_effects == 0 {
         return Err(BadInput("--max-effects 0: give 1 or more".into()).into());
@@ -85,7 +126,7 @@ pub fn settings(a: &DiagnoseArgs) -> Result<Settings> {
         None => ColumnMap::default(),
     };
     Ok(Settings {
-        pair: a.high.clone().zip(a.low.clone()),
+        pair: a.high.is_some() && a.low.is_some(),
         training,
         validation: a.validate.clone(),
         columns,
@@ -109,6 +150,7 @@ fn current_settings(a: &DiagnoseArgs) -> Result<Settings> {
         )
         .into());
     }
+    held_out_differs(a)?;
     let Some(k) = a.torque_constant else {
         return Err(BadInput(
             "diagnose --input current needs --torque-constant K (the torque or force per unit of the current column)".into(),
@@ -136,7 +178,7 @@ fn current_settings(a: &DiagnoseArgs) -> Result<Settings> {
         AxisArg::Linear => AxisGeometry::Linear,
     };
     Ok(Settings {
-        pair: None,
+        pair: false,
         training: a.records.clone(),
         validation: a.validate.clone(),
         columns,
@@ -168,14 +210,24 @@ pub fn run(s: &Settings) -> Result<()> {
     if let Some(c) = &s.current {
         return run_current(s, c);
     }
-    let load = |paths: &[PathBuf]| -> Result<Vec<LoadedExcited>> {
-        paths
-            .iter()
-            .map(|p| load_excited(p, &s.columns, s.quiet || s.json))
-            .collect()
-    };
-    let training = load(&s.training)?;
-    let validation = load(&s.validation)?;
+    // Clipping warnings on standard error, unless quiet or the report is JSON.
+    let no_warnings = s.quiet || s.json;
+    // Each file is read once, so that a pipe (`/dev/stdin`, `<(...)`) serves as a file does:
+    // the step pair's records, as read, give the paper's start too.
+    let mut pair = Vec::new();
+    let mut training = Vec::new();
+    for (k, path) in s.training.iter().enumerate() {
+        let loaded = read_loaded(path, &s.columns, true)?;
+        if s.pair && k < 2 {
+            pair.push((path, loaded.clone()));
+        }
+        training.push(excited_from(path, loaded, no_warnings)?);
+    }
+    let validation = s
+        .validation
+        .iter()
+        .map(|p| load_excited(p, &s.columns, no_warnings))
+        .collect::<Result<Vec<_>>>()?;
     let train: Vec<ExcitedRecord<'_>> = training.iter().map(LoadedExcited::excited).collect();
     let valid: Vec<ExcitedRecord<'_>> = validation.iter().map(LoadedExcited::excited).collect();
     let names: Vec<&str> = training
@@ -188,16 +240,16 @@ pub fn run(s: &Settings) -> Result<()> {
     // equation-error estimate otherwise. An unmodelled effect can leave the paper's method
     // without an answer (a 0.3 V brush drop made its Ts negative): the records still go on to
     // the diagnosis, which is there to find that effect.
-    let paper_start = match &s.pair {
-        Some((high, low)) => {
-            let hv = load_step(high, &s.columns, true)?;
-            let lv = load_step(low, &s.columns, true)?;
+    let paper_start = match <[_; 2]>::try_from(pair) {
+        Ok([(high, hv), (low, lv)]) => {
+            let hv = step_from(high, hv, true)?;
+            let lv = step_from(low, lv, true)?;
             let (hv, lv, _) = in_order(hv, lv);
             identify_pair(&hv, &lv, StepMethod::Paper)
                 .ok()
                 .and_then(|r| r.params())
         }
-        None => None,
+        Err(_) => None,
     };
     let start = match paper_start {
         Some(p) => p,
@@ -246,9 +298,9 @@ pub fn run(s: &Settings) -> Result<()> {
         separating,
     };
     if s.json {
-        println!("{}", serde_json::to_string_pretty(&report_json(&report))?);
+        outln!("{}", serde_json::to_string_pretty(&report_json(&report))?)?;
     } else {
-        print_report(&report, t0.elapsed().as_secs_f64());
+        print_report(&report, t0.elapsed().as_secs_f64())?;
     }
     if let Some(dir) = &s.plot {
         let records: Vec<FigureRecord> = training
@@ -276,7 +328,15 @@ pub fn run(s: &Settings) -> Result<()> {
         let figures = crate::figures::channel_residuals(&records, &nominal, after.as_deref());
         crate::figures::residual_figures(dir, &figures, &named, s.quiet)?;
     }
-    Ok(())
+    // With no effect named the result is the nominal model: one that is not a result (no
+    // intervals, a parameter run off) makes the verdict `none` no result either (exit 3).
+    match (d.named().is_empty(), d.nominal_note.as_deref()) {
+        (true, Some(note)) => Err(NotConverged(format!(
+            "{label}: no effect is named, and the nominal model is not a result ({note}): the verdict `none` rests on it"
+        ))
+        .into()),
+        _ => Ok(()),
+    }
 }
 
 /// What the report shows, from the diagnosis of a voltage- or a current-driven axis.
@@ -375,7 +435,9 @@ fn advice(name: &str) -> &'static str {
     }
 }
 
-fn print_report(d: &Report<'_>, seconds: f64) {
+/// The report as text: the verdict with what to do, the held-out data and the time taken
+/// (`seconds`), where the nominal model misses, and each stage's table of candidates.
+fn print_report(d: &Report<'_>, seconds: f64) -> Result<()> {
     let named = d.named();
     let first = d.stages.first();
     match (named.first(), first) {
@@ -400,7 +462,7 @@ fn print_report(d: &Report<'_>, seconds: f64) {
                     .filter(|m| m.relative.abs() > 0.01)
                     .map(|m| format!("{} {:+.1} %", m.name, 100.0 * m.relative))
                     .collect();
-                println!(
+                outln!(
                     "Verdict: {name} ({size}). Modelled, it cuts the held-out NRMSE from {:.4} to {:.4} (training {:.4} → {:.4}).{} To do: {}.",
                     c.heldout_nrmse_before,
                     c.heldout_nrmse_after,
@@ -415,42 +477,42 @@ fn print_report(d: &Report<'_>, seconds: f64) {
                         )
                     },
                     advice(name)
-                );
+                )?;
             }
             if !stage.verdict.ambiguous_with.is_empty() {
-                println!(
+                outln!(
                     "Ambiguous: {} explain(s) the held-out data as well as {name}.",
                     stage.verdict.ambiguous_with.join(", ")
-                );
+                )?;
                 match &d.separating {
-                    Some(t) => println!("{}", t.text()),
-                    None => println!("A record at another voltage or a reversal would separate them."),
+                    Some(t) => outln!("{}", t.text())?,
+                    None => outln!("A record at another voltage or a reversal would separate them.")?,
                 }
             }
             for extra in named.iter().skip(1) {
-                println!("Also present, on top of {name}: {extra}.");
+                outln!("Also present, on top of {name}: {extra}.")?;
             }
         }
-        _ if d.localisation.any_significant() => println!(
+        _ if d.localisation.any_significant() => outln!(
             "Verdict: none — no candidate effect improves the held-out data significantly, yet the nominal model misses by more than the noise floor (where: below): the cause is outside the candidates, or a candidate fitted against its physics."
-        ),
-        _ => println!(
+        )?,
+        _ => outln!(
             "Verdict: none — no candidate effect improves the held-out data significantly: the nominal model explains the records to within their noise."
-        ),
+        )?,
     }
-    println!("Held-out data: {}. {:.1} s.", d.heldout, seconds);
+    outln!("Held-out data: {}. {:.1} s.", d.heldout, seconds)?;
     if let Some(note) = d.nominal_note {
-        println!("The nominal model alone is not a result here: {note}.");
+        outln!("The nominal model alone is not a result here: {note}.")?;
     }
     let findings = d.localisation.significant_findings();
     if !findings.is_empty() {
-        println!("Where the nominal model misses:");
+        outln!("Where the nominal model misses:")?;
         for f in findings.iter().take(5) {
-            println!("  {}", f.text);
+            outln!("  {}", f.text)?;
         }
     }
     for (k, stage) in d.stages.iter().enumerate() {
-        println!(
+        outln!(
             "\nstage {} (on top of {}):",
             k + 1,
             if stage.base.is_empty() {
@@ -458,17 +520,22 @@ fn print_report(d: &Report<'_>, seconds: f64) {
             } else {
                 stage.base.join(" + ")
             }
-        );
-        println!(
+        )?;
+        outln!(
             "  {:<22} {:<20} {:>9} {:>9} {:>17} {:>17}  parameters",
-            "effect", "assessment", "score", "p", "train NRMSE", "held-out NRMSE"
-        );
+            "effect",
+            "assessment",
+            "score",
+            "p",
+            "train NRMSE",
+            "held-out NRMSE"
+        )?;
         for c in &stage.candidates {
             let score = c
                 .screening
                 .map_or("-".to_string(), |s| format!("{:.3e}", s.statistic));
             if !refitted(c) {
-                println!(
+                outln!(
                     "  {:<22} {:<20} {score:>9} {:>9}  {}",
                     c.name,
                     c.assessment.words(),
@@ -478,7 +545,7 @@ fn print_report(d: &Report<'_>, seconds: f64) {
                         (Some(why), _) => format!("refit failed: {why}"),
                         (None, _) => "not refitted".to_string(),
                     }
-                );
+                )?;
                 continue;
             }
             let params = c
@@ -491,7 +558,7 @@ fn print_report(d: &Report<'_>, seconds: f64) {
                 Some(why) => format!("{params} ({why})"),
                 None => params,
             };
-            println!(
+            outln!(
                 "  {:<22} {:<20} {score:>9} {:>9.2e} {:>8.4} → {:<6.4} {:>8.4} → {:<6.4}  {params}",
                 c.name,
                 c.assessment.words(),
@@ -500,9 +567,10 @@ fn print_report(d: &Report<'_>, seconds: f64) {
                 c.train_nrmse_after,
                 c.heldout_nrmse_before,
                 c.heldout_nrmse_after
-            );
+            )?;
         }
     }
+    Ok(())
 }
 
 /// The separating test of an ambiguous verdict, for records like `train` and `valid`: steps
@@ -569,12 +637,12 @@ fn run_current(s: &Settings, c: &CurrentDrive) -> Result<()> {
         separating: None,
     };
     if s.json {
-        println!("{}", serde_json::to_string_pretty(&report_json(&report))?);
+        outln!("{}", serde_json::to_string_pretty(&report_json(&report))?)?;
     } else {
-        println!(
+        outln!(
             "inverse model of the current-driven axis (torque = J q'' + f q' + Ts sign(q') + offset): its torque residual, localised in the unit of the current column (residual / {k})"
-        );
-        print_report(&report, t0.elapsed().as_secs_f64());
+        )?;
+        print_report(&report, t0.elapsed().as_secs_f64())?;
     }
     if let Some(dir) = &s.plot {
         let (torque_label, residual_label) = match geometry {
@@ -586,7 +654,9 @@ fn run_current(s: &Settings, c: &CurrentDrive) -> Result<()> {
             .traces
             .iter()
             .zip(&names)
-            .map(|(trace, name)| ResidualFigure {
+            .enumerate()
+            .map(|(record, (trace, name))| ResidualFigure {
+                record,
                 path: name,
                 channel: torque_label,
                 y_label: residual_label,

@@ -18,6 +18,7 @@ use serde_json::json;
 use plotters::style::{BLACK, BLUE, RED};
 
 use crate::args::EmpsArgs;
+use crate::output::outln;
 use crate::plot::{self, Panel, Series};
 use crate::record_csv::{read_table, Table};
 use crate::BadInput;
@@ -191,7 +192,7 @@ pub fn run(a: &Settings) -> Result<()> {
         )?;
         if !a.json {
             for path in written {
-                println!("wrote {}", path.display());
+                outln!("wrote {}", path.display())?;
             }
         }
     }
@@ -210,29 +211,25 @@ pub fn run(a: &Settings) -> Result<()> {
                 "pulse_force_n": EMPS_PULSE_FORCE_N,
             },
         });
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        outln!("{}", serde_json::to_string_pretty(&report)?)?;
         return Ok(());
     }
-    println!(
-        "EMPS — identified on {est_name} (force = {DRIVE_GAIN_N_PER_V} × vir), inverse model:"
-    );
+    outln!("EMPS — identified on {est_name} (force = {DRIVE_GAIN_N_PER_V} × vir), inverse model:")?;
     for (name, v, r) in against_reference(&axis) {
-        println!(
+        outln!(
             "  {name:<6} {v:>10.4}   published IDIM-LS {r:>10.4}   ({:+.2} %)",
             100.0 * (v / r - 1.0)
-        );
+        )?;
     }
-    println!("closed-loop simulation (PD: kp = {EMPS_KP_PER_S} 1/s, kv = {EMPS_KV_V_PER_M_S} V/(m/s)), relative errors 100·‖x − x̂‖/‖x‖:");
-    println!(
-        "  estimation record:                 position {est_pos:.4} %, force {est_force:.2} %"
-    );
-    println!(
+    outln!("closed-loop simulation (PD: kp = {EMPS_KP_PER_S} 1/s, kv = {EMPS_KV_V_PER_M_S} V/(m/s)), relative errors 100·‖x − x̂‖/‖x‖:")?;
+    outln!("  estimation record:                 position {est_pos:.4} %, force {est_force:.2} %")?;
+    outln!(
         "  validation record, pulses unmodelled: position {val_pos:.4} %, force {val_force:.2} %"
-    );
-    println!("  validation record, pulses added:      position {val_pos_p:.4} %, force {val_force_p:.2} %  (pulses as {EMPS_PULSE_COMMAND_V} V of drive command = {EMPS_PULSE_FORCE_N} N: the recorded vir jumps by ±{EMPS_PULSE_COMMAND_V} at each edge)");
-    println!(
+    )?;
+    outln!("  validation record, pulses added:      position {val_pos_p:.4} %, force {val_force_p:.2} %  (pulses as {EMPS_PULSE_COMMAND_V} V of drive command = {EMPS_PULSE_FORCE_N} N: the recorded vir jumps by ±{EMPS_PULSE_COMMAND_V} at each edge)")?;
+    outln!(
         "where it hurts: position RMS error while a pulse is on ({:.0} % of the time) {:.3e} m with the pulses unmodelled, {:.3e} m with them; while off {:.3e} m / {:.3e} m",
         100.0 * near_fraction, near_no, near_with, far_no, far_with
-    );
+    )?;
     Ok(())
 }

@@ -8,6 +8,7 @@ use daq_emu::host::{Emulator, LineFaults, Plant};
 use serialport::{SerialPort, TTYPort};
 
 use crate::args::EmulateArgs;
+use crate::output::outln;
 use crate::{settings, BadInput};
 
 /// `ber=RATE,drop=RATE,close=BYTES,seed=N`.
@@ -89,8 +90,8 @@ pub fn run(a: &Settings) -> Result<()> {
     }
     let (mut master, slave) = TTYPort::pair().context("cannot create a pseudo-terminal pair")?;
     let path = slave.name().context("the pseudo-terminal has no name")?;
-    println!("PTY {path}");
-    std::io::stdout().flush()?;
+    // Flushed at once ([`outln!`]): a client reads the name before connecting.
+    outln!("PTY {path}")?;
     if !a.quiet {
         eprintln!("emulated logger on {path} (115200 baud 8N1); Ctrl-C stops it");
     }

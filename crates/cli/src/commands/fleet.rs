@@ -10,7 +10,7 @@ use anyhow::Result;
 use motor_model::{Derived, Effects, Input, MotorParams, NoiseRng};
 
 use crate::args::FleetArgs;
-use crate::output;
+use crate::output::{self, outln};
 use crate::progress::Jobs;
 use crate::record_csv::write_file;
 use crate::settings::Logger;
@@ -138,6 +138,6 @@ pub fn run(a: &Settings) -> Result<()> {
         progress.done(m + 1, String::new);
     }
     drop(progress);
-    println!("{} motors in {}", a.motors, a.out.display());
+    outln!("{} motors in {}", a.motors, a.out.display())?;
     Ok(())
 }

@@ -5,6 +5,7 @@ use motor_model::{Derived, MotorParams, Regime};
 use serde_json::json;
 
 use crate::args::ModelArgs;
+use crate::output::outln;
 use crate::settings;
 
 /// The derived constants as a JSON object (keys KE, Ks, wn, zeta, sigma, wa, tau_m, tau_e,
@@ -40,20 +41,25 @@ impl Settings {
 pub fn run(s: &Settings) -> Result<()> {
     let p = s.motor;
     if s.json {
-        println!("{}", serde_json::to_string_pretty(&to_json(&p))?);
+        outln!("{}", serde_json::to_string_pretty(&to_json(&p))?)?;
         return Ok(());
     }
     let d = Derived::new(&p);
-    println!(
+    outln!(
         "motor: R = {} ohm, L = {} H, k = {} N·m/A, f = {} N·m·s/rad, J = {} kg·m², Ts = {} N·m",
-        p.r_ohm, p.l_henry, p.k_nm_per_a, p.f_nms_per_rad, p.j_kgm2, p.ts_nm
-    );
+        p.r_ohm,
+        p.l_henry,
+        p.k_nm_per_a,
+        p.f_nms_per_rad,
+        p.j_kgm2,
+        p.ts_nm
+    )?;
     let regime = match d.regime {
         Regime::Overdamped => "overdamped (zeta > 1)",
         Regime::Critical => "critically damped (zeta = 1)",
         Regime::Underdamped => "underdamped (zeta < 1)",
     };
-    println!("regime: {regime}");
+    outln!("regime: {regime}")?;
     let opt = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.6}"));
     let rows = [
         ("KE", format!("{:.6}", d.k_e), "A/V", "(16) voltage gain"),
@@ -99,7 +105,7 @@ pub fn run(s: &Settings) -> Result<()> {
         ),
     ];
     for (name, value, unit, what) in rows {
-        println!("  {name:<6} {value:>14} {unit:<8} {what}");
+        outln!("  {name:<6} {value:>14} {unit:<8} {what}")?;
     }
     Ok(())
 }

@@ -12,6 +12,7 @@ use motor_model::{MotorParams, NoiseRng};
 use serde_json::json;
 
 use crate::args::MontecarloArgs;
+use crate::output::outln;
 use crate::progress::Jobs;
 use crate::settings::{self, Logger};
 use crate::simulated::{record_at, StepTiming};
@@ -308,7 +309,7 @@ pub fn run(study: &Settings) -> Result<()> {
                 "full_median_abs_rel_error": full, "full_ci95_coverage": coverage,
             })).collect::<Vec<_>>(),
         });
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        outln!("{}", serde_json::to_string_pretty(&report)?)?;
         return failed_runs(&failures, study.runs);
     }
     let hold = study
@@ -319,43 +320,43 @@ pub fn run(study: &Settings) -> Result<()> {
         .chain
         .voltage_noise_lsb
         .map_or(String::new(), |v| format!(" ({v} LSB on the voltage)"));
-    println!(
+    outln!(
         "Monte Carlo: {} record pairs ({} V and {} V steps{hold}, {} s at {} Hz; {}-bit ADC, {} LSB noise{voltage_noise}, encoder {} counts/rev, speed from the encoder)",
         runs.len(), study.high_voltage_v, study.low_voltage_v, study.logger.duration_s, study.logger.rate_hz, study.logger.adc_bits, study.logger.noise_lsb, study.logger.encoder_cpr
-    );
-    println!(
+    )?;
+    outln!(
         "  param        truth   paper median |error|   full median |error|   full 95% CI coverage"
-    );
+    )?;
     for (name, truth, paper, full, coverage) in &rows {
-        println!(
+        outln!(
             "  {name:<5} {truth:>12.6}   {:>19.4} %   {:>18.5} %   {:>19.1} %",
             100.0 * paper,
             100.0 * full,
             100.0 * coverage
-        );
+        )?;
     }
-    println!(
+    outln!(
         "full fits converged: {converged}/{}; intervals available: {with_ci}/{}; {elapsed:.1} s on {threads} threads",
         runs.len(),
         runs.len()
-    );
+    )?;
     for stop in runs.iter().filter_map(|r| r.stop.as_ref()).take(5) {
-        println!("  not converged: {stop}");
+        outln!("  not converged: {stop}")?;
     }
     if paper_applied < runs.len() {
-        println!(
+        outln!(
             "the paper's method applied to {paper_applied}/{} runs (it needs an overdamped response); the others started from the steady states",
             runs.len()
-        );
+        )?;
     }
     if !failures.is_empty() {
-        println!(
+        outln!(
             "{} of {} runs failed; the first:",
             failures.len(),
             study.runs
-        );
+        )?;
         for f in failures.iter().take(5) {
-            println!("  {f}");
+            outln!("  {f}")?;
         }
     }
     failed_runs(&failures, study.runs)

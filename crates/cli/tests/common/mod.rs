@@ -11,6 +11,34 @@ pub fn motorid(args: &[&str]) -> Output {
         .expect("the motorid binary runs")
 }
 
+/// Runs `motorid` with `args`, its standard output connected to `stdout` (a file, `/dev/full`):
+/// the output's `stdout` is empty.
+pub fn motorid_to(args: &[&str], stdout: std::process::Stdio) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_motorid"))
+        .args(args)
+        .stdout(stdout)
+        .output()
+        .expect("the motorid binary runs")
+}
+
+/// Runs `motorid` with `args`, `input` written to its standard input through a pipe, which
+/// (unlike a file, which `/dev/stdin` opens afresh) can be read only once.
+pub fn motorid_fed(args: &[&str], input: Vec<u8>) -> Output {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_motorid"))
+        .args(args)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("the motorid binary runs");
+    let mut pipe = child.stdin.take().expect("piped stdin");
+    // Written meanwhile, and closed when done: a child that stops reading does not block it.
+    let writer = std::thread::spawn(move || std::io::Write::write_all(&mut pipe, &input));
+    let out = child.wait_with_output().expect("waiting for motorid");
+    writer.join().expect("the writer thread").ok();
+    out
+}
+
 /// Runs `motorid` with `args`, killed after `limit`: `None` if it had not finished by then.
 pub fn motorid_within(args: &[&str], limit: std::time::Duration) -> Option<Output> {
     let mut child = Command::new(env!("CARGO_BIN_EXE_motorid"))

@@ -16,7 +16,7 @@ use fit::{
 use motor_model::MotorParams;
 use serde_json::{json, Value};
 
-use crate::output;
+use crate::output::{self, outln};
 use crate::progress::Jobs;
 use crate::record_csv::ColumnMap;
 use crate::steps::{fit_excited, identify_pair, in_order, load_excited, load_step, LoadedExcited};
@@ -333,17 +333,24 @@ pub fn run(a: &Settings, dir: &Path) -> Result<()> {
         serde_json::to_string_pretty(&report)?.as_bytes(),
     )?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        outln!("{}", serde_json::to_string_pretty(&report)?)?;
     } else {
-        println!(
+        outln!(
             "{:<16} {:<13} {:>12} {:>12} {:>12} {:>12} {:>12} {:>12}",
-            "motor", "status", "R", "L", "k", "f", "J", "Ts"
-        );
+            "motor",
+            "status",
+            "R",
+            "L",
+            "k",
+            "f",
+            "J",
+            "Ts"
+        )?;
         for r in &rows {
             match &r.outcome {
                 Outcome::Fitted(f) => {
                     let p = &f.params;
-                    println!(
+                    outln!(
                         "{:<16} {:<13} {:>12.5e} {:>12.5e} {:>12.5e} {:>12.5e} {:>12.5e} {:>12.5e}",
                         r.name,
                         status_of(f),
@@ -353,34 +360,34 @@ pub fn run(a: &Settings, dir: &Path) -> Result<()> {
                         p.f_nms_per_rad,
                         p.j_kgm2,
                         p.ts_nm
-                    );
+                    )?;
                 }
-                Outcome::Failed { message, .. } => println!("{:<16} error: {message}", r.name),
+                Outcome::Failed { message, .. } => outln!("{:<16} error: {message}", r.name)?,
             }
         }
-        println!(
+        outln!(
             "{n} motors: {ok} identified, {not_converged} not converged or refused, {failed} failed; {elapsed:.1} s on {threads} threads"
-        );
+        )?;
         let misses: Vec<&str> = rows
             .iter()
             .filter(|r| r.model_check.as_ref().and_then(ModelCheck::findings) > Some(0))
             .map(|r| r.name.as_str())
             .collect();
         if !misses.is_empty() {
-            println!(
+            outln!(
                 "warning: the model misses something the records of {} of {ok} identified motors show (their residual is not their noise; model_check in {}): {} — motorid diagnose on a folder's records looks for the cause",
                 misses.len(),
                 json_path.display(),
                 misses.join(", ")
-            );
+            )?;
         }
         if !fitted.is_empty() {
-            println!("against motor.json (median |error|, 95 % intervals containing the truth):");
+            outln!("against motor.json (median |error|, 95 % intervals containing the truth):")?;
             for (name, med, cov, with) in &aggregate {
-                println!("  {name:<3} {med:>9.4} %   {cov}/{with}");
+                outln!("  {name:<3} {med:>9.4} %   {cov}/{with}")?;
             }
         }
-        println!("wrote {} and {}", csv_path.display(), json_path.display());
+        outln!("wrote {} and {}", csv_path.display(), json_path.display())?;
     }
     let bad = rows.iter().any(|r| {
         matches!(

@@ -7,6 +7,7 @@ use fit::{
 };
 use serde_json::{json, Value};
 
+use crate::output::outln;
 use crate::{BadInput, NotConverged};
 
 use super::{channels_json, print_channels, sig, Settings};
@@ -206,10 +207,10 @@ pub fn report(a: &Settings, kind: &RecordKind, fit: &FeedforwardFit, files: &[&s
                 "channels": channels_json(&fit.quality, files),
             },
         });
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        outln!("{}", serde_json::to_string_pretty(&report)?)?;
     } else {
-        println!("{}", kind_line(kind));
-        println!(
+        outln!("{}", kind_line(kind))?;
+        outln!(
             "voltage and speed: E = kS sign(w) + kV w + kA dw/dt ({}) fitted by output error on the speed{}",
             match fit.tau_e {
                 TauE::Fitted { .. } | TauE::NotResolved { .. } | TauE::Traded { .. } => {
@@ -221,8 +222,8 @@ pub fn report(a: &Settings, kind: &RecordKind, fit: &FeedforwardFit, files: &[&s
                 Some((r, k)) => format!("; J, f, Ts from the given R = {} ohm, k = {} N·m/A (their own uncertainty not included)", sig(r), sig(k)),
                 None => String::new(),
             }
-        );
-        println!("      {:>12}   {:<27} unit", "value", "95% CI");
+        )?;
+        outln!("      {:>12}   {:<27} unit", "value", "95% CI")?;
         let mut poorly = Vec::new();
         for p in &estimates {
             let ci = p.ci95.map_or("-".to_string(), |[lo, hi]| {
@@ -231,7 +232,7 @@ pub fn report(a: &Settings, kind: &RecordKind, fit: &FeedforwardFit, files: &[&s
             if let (true, Some(rel)) = (p.poorly_determined(), p.relative_half_width()) {
                 poorly.push(format!("{} (±{:.0} %)", p.name, 100.0 * rel));
             }
-            println!("  {:<3} {:>12}   {ci:<27} {}", p.name, sig(p.value), p.unit);
+            outln!("  {:<3} {:>12}   {ci:<27} {}", p.name, sig(p.value), p.unit)?;
         }
         let tau_m = match fit.tau_e {
             TauE::Traded { lead_ci95, .. } => format!(
@@ -240,27 +241,27 @@ pub fn report(a: &Settings, kind: &RecordKind, fit: &FeedforwardFit, files: &[&s
             ),
             _ => format!("{} s", sig(fit.params.tau_m_s())),
         };
-        println!(
+        outln!(
             "derived: tau_m = kA/kV = {tau_m}; {}",
             tau_e_text(&fit.tau_e)
-        );
+        )?;
         for (w, f) in fit.initial_speed_rad_s.iter().zip(files) {
             if *w != 0.0 {
-                println!("  {f}: starts running at {} rad/s (fitted)", sig(*w));
+                outln!("  {f}: starts running at {} rad/s (fitted)", sig(*w))?;
             }
         }
-        println!(
+        outln!(
             "fit: {} after {} iterations",
             fit.termination.text(),
             fit.iterations
-        );
-        print_channels(&fit.quality, files);
+        )?;
+        print_channels(&fit.quality, files)?;
         if !poorly.is_empty() {
-            println!(
+            outln!(
                 "warning: poorly determined by these records: {} — the 95% interval is wider than {:.0} % of the value",
                 poorly.join(", "),
                 100.0 * fit::POORLY_DETERMINED
-            );
+            )?;
         }
     }
     if !fit.termination.converged() {

@@ -18,6 +18,7 @@ use std::path::PathBuf;
 
 use crate::args::{AxisArg, DriveArg, IdentifyArgs};
 use crate::figures::FigureRecord;
+use crate::output::outln;
 use crate::progress::Phases;
 use crate::record_csv::{read_loaded, read_loaded_current_optional, ColumnMap};
 use crate::settings;
@@ -242,17 +243,18 @@ fn channels_json(quality: &[ChannelQuality], files: &[&str]) -> Value {
 }
 
 /// One line per channel of each record (named from `files`): residual RMS, fit, noise.
-fn print_channels(quality: &[ChannelQuality], files: &[&str]) {
+fn print_channels(quality: &[ChannelQuality], files: &[&str]) -> Result<()> {
     for q in quality {
-        println!(
+        outln!(
             "  {} {}: residual RMS {:.3e}, fit {:.3} %, noise {:.3e}",
             files.get(q.test).copied().unwrap_or("?"),
             q.channel.name(),
             q.rms_residual,
             q.nrmse_fit_percent,
             q.noise_std
-        );
+        )?;
     }
+    Ok(())
 }
 
 fn paper_json(paper: &PaperIdentification) -> Value {
@@ -339,19 +341,19 @@ fn print_table(
     full: Option<&FullFit>,
     files: &[&str],
     note: Option<&str>,
-) {
+) -> Result<()> {
     let params = match (full, paper) {
         (Some(f), _) => f.params,
         (None, Ok(p)) => p.params,
-        (None, Err(_)) => return,
+        (None, Err(_)) => return Ok(()),
     };
     match method {
-        "full" if whole => println!("full model: R, L, k, f, J, Ts fitted jointly to both whole records, rise and return to 0 V (output error, the levels and their instants as uncertain inputs)"),
-        "full" => println!("full model: R, L, k, f, J, Ts fitted jointly to both records (exact response, breakaway included)"),
-        "paper" => println!("paper method: fit of Eq. (33), then Eqs. (34)-(51) (the method gives no confidence intervals)"),
-        _ => println!("output error: R, L, k, f, J, Ts fitted by simulating each record's own voltage (stick-slip model, Appendix D)"),
+        "full" if whole => outln!("full model: R, L, k, f, J, Ts fitted jointly to both whole records, rise and return to 0 V (output error, the levels and their instants as uncertain inputs)")?,
+        "full" => outln!("full model: R, L, k, f, J, Ts fitted jointly to both records (exact response, breakaway included)")?,
+        "paper" => outln!("paper method: fit of Eq. (33), then Eqs. (34)-(51) (the method gives no confidence intervals)")?,
+        _ => outln!("output error: R, L, k, f, J, Ts fitted by simulating each record's own voltage (stick-slip model, Appendix D)")?,
     }
-    println!("      {:>12}   {:<27} unit", "value", "95% CI");
+    outln!("      {:>12}   {:<27} unit", "value", "95% CI")?;
     let mut poorly = Vec::new();
     for p in parameter_estimates(&params, full.and_then(|f| f.ci95.as_ref())) {
         let ci_text = p.ci95.map_or("-".to_string(), |[lo, hi]| {
@@ -360,68 +362,69 @@ fn print_table(
         if let (true, Some(rel)) = (p.poorly_determined(), p.relative_half_width()) {
             poorly.push(format!("{} (±{:.0} %)", p.name, 100.0 * rel));
         }
-        println!(
+        outln!(
             "  {:<3} {:>12}   {:<27} {}",
             p.name,
             sig(p.value),
             ci_text,
             p.unit
-        );
+        )?;
     }
     let d = Derived::new(&params);
-    println!(
+    outln!(
         "derived: KE = {:.6} A/V, Ks = {:.6} A/(N·m), tau_e = {:.6} s, tau_m = {:.6} s, wn = {:.6} rad/s, zeta = {:.6}",
         d.k_e, d.k_s, d.tau_e, d.tau_m, d.omega_n, d.zeta
-    );
+    )?;
     match full {
         Some(f) => {
             match &f.refusal {
                 Some(why) if f.termination.converged() => {
-                    println!("fit: FAILED after {} iterations — {why}", f.iterations)
+                    outln!("fit: FAILED after {} iterations — {why}", f.iterations)?
                 }
-                _ => println!(
+                _ => outln!(
                     "fit: {} after {} iterations",
                     f.termination.text(),
                     f.iterations
-                ),
+                )?,
             }
-            print_channels(&f.quality, files);
+            print_channels(&f.quality, files)?;
         }
         None => {
             if let Ok(paper) = paper {
-                println!(
+                outln!(
                     "Eq. (33) fit: alpha = {:.6}, sigma = {:.6} 1/s, wa = {:.6} rad/s; {} after {} iterations",
                     paper.fit_33.params.alpha, paper.fit_33.params.sigma, paper.fit_33.params.omega_a,
                     paper.fit_33.report.termination.text(), paper.fit_33.report.iterations
-                )
+                )?
             }
         }
     }
     if let Ok(paper) = paper {
         match &paper.speed_check {
-            Ok(c) => println!(
+            Ok(c) => outln!(
                 "(C.8) speed check: wn = {:.6} rad/s, zeta = {:.6} from the speed; {:.6}, {:.6} from the current (Eqs. (35), (36))",
                 c.omega_n, c.zeta, paper.high.omega_n, paper.high.zeta
-            ),
-            Err(e) => println!("(C.8) speed check not made: {e}"),
+            )?,
+            Err(e) => outln!("(C.8) speed check not made: {e}")?,
         }
         if let Some(why) = paper.speed_check_contradiction() {
             match full {
-                None => println!("warning: {why} — use the full method (--method full)"),
-                Some(_) => println!("warning: {why}"),
+                None => outln!("warning: {why} — use the full method (--method full)")?,
+                Some(_) => outln!("warning: {why}")?,
             }
         }
     }
     if let Some(why) = note {
-        println!("note: {why}");
+        outln!("note: {why}")?;
     }
     if !poorly.is_empty() {
-        println!(
+        outln!(
             "warning: poorly determined by these records: {} — the 95% interval is wider than {:.0} % of the value",
             poorly.join(", "),
             100.0 * fit::POORLY_DETERMINED
-        );
+        )?;
     }
+    Ok(())
 }
 
 /// `--steady`: the apparent-resistance law (8) over the steady records at `paths`, and Ts by
@@ -458,25 +461,25 @@ fn run_steady(a: &Settings, paths: &[PathBuf], r: f64, k: f64) -> Result<()> {
             "points": fit.points.iter().map(|(i, dr)| json!({"Ir": i, "deltaR": dr})).collect::<Vec<_>>(),
             "termination": fit.termination.text(),
         });
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        outln!("{}", serde_json::to_string_pretty(&report)?)?;
     } else {
-        println!(
+        outln!(
             "apparent resistance, Eq. (8): dR = a - b/Ir over {} tests",
             tests.len()
-        );
+        )?;
         for ((path, (e, ir)), (_, dr)) in paths.iter().zip(&tests).zip(&fit.points) {
-            println!(
+            outln!(
                 "  {}: E = {e:.6} V, Ir = {ir:.6} A, dR = {dr:.6} ohm",
                 path.display()
-            );
+            )?;
         }
-        println!(
+        outln!(
             "  a = {:.6} ohm, b = {:.6} ohm·A ({})",
             fit.a_ohm,
             fit.b_ohm_a,
             fit.termination.text()
-        );
-        println!("Ts = k b / a = {:.6} N·m  (Eq. (9))", fit.ts_nm);
+        )?;
+        outln!("Ts = k b / a = {:.6} N·m  (Eq. (9))", fit.ts_nm)?;
     }
     if let Some(dir) = &a.plot {
         crate::output::create_dir(dir)?;
@@ -674,33 +677,33 @@ fn run_current(a: &Settings, paths: &[PathBuf]) -> Result<()> {
             "offset_fitted": fit.offset_status == OffsetStatus::Fitted,
             "offset_note": offset_note,
         });
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        outln!("{}", serde_json::to_string_pretty(&report)?)?;
         return Ok(());
     }
-    println!("{}", kinds::kind_line(&kind));
-    println!(
+    outln!("{}", kinds::kind_line(&kind))?;
+    outln!(
         "inverse model (current-driven axis): torque = J q'' + f q' + Ts sign(q') + offset, from {shown}"
-    );
+    )?;
     if k_source != "given" {
-        println!("torque constant k = {} from the {k_source}", sig(k));
+        outln!("torque constant k = {} from the {k_source}", sig(k))?;
     }
     if let Some(note) = offset_note {
-        println!("note: {note}");
+        outln!("note: {note}")?;
     }
-    println!("      {:>12}   {:<27} unit", "value", "95% CI");
+    outln!("      {:>12}   {:<27} unit", "value", "95% CI")?;
     for (name, value, ci, unit) in rows() {
         let ci = ci.map_or("-".to_string(), |[lo, hi]| {
             format!("[{}, {}]", sig(lo), sig(hi))
         });
-        println!("  {name:<6} {:>12}   {ci:<27} {unit}", sig(value));
+        outln!("  {name:<6} {:>12}   {ci:<27} {unit}", sig(value))?;
     }
-    println!(
+    outln!(
         "fit: {} samples after decimation by {}, torque residual RMS {}, fit {:.2} %",
         fit.samples,
         a.decimation,
         sig(fit.residual_rms),
         fit.nrmse_fit_percent
-    );
+    )?;
     Ok(())
 }
 
@@ -780,13 +783,13 @@ pub fn run(a: &Settings) -> Result<()> {
             obj.insert("record_kind".into(), kinds::kind_json(&kind));
             obj.insert("model_check".into(), check.json());
         }
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        outln!("{}", serde_json::to_string_pretty(&report)?)?;
     } else {
-        println!("{}", kinds::kind_line(&kind));
+        outln!("{}", kinds::kind_line(&kind))?;
         let note = result.note();
         let whole = hv.whole.is_some() && lv.whole.is_some();
-        print_table(method, whole, paper, full, &files, note.as_deref());
-        check.print();
+        print_table(method, whole, paper, full, &files, note.as_deref())?;
+        check.print()?;
     }
     if let (Some(dir), Some(f)) = (&a.plot, full) {
         let records = [&hv, &lv].map(|s| FigureRecord {
@@ -933,10 +936,10 @@ fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Resu
             obj.insert("record_kind".into(), kinds::kind_json(&kind));
             obj.insert("model_check".into(), check.json());
         }
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        outln!("{}", serde_json::to_string_pretty(&report)?)?;
     } else {
-        println!("{}", kinds::kind_line(&kind));
-        print_table("output_error", false, Err(""), Some(&full), &files, None);
+        outln!("{}", kinds::kind_line(&kind))?;
+        print_table("output_error", false, Err(""), Some(&full), &files, None)?;
         for (file, chosen, fitted) in &initial {
             let at = fitted.map_or(String::new(), |f| {
                 format!(
@@ -945,16 +948,16 @@ fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Resu
                     sig(f.speed_rad_s)
                 )
             });
-            println!(
+            outln!(
                 "initial state of {file}: {} — {}{at}",
                 chosen.state.name(),
                 chosen.reason
-            );
+            )?;
         }
         if let Some(note) = note {
-            println!("note: {note}");
+            outln!("note: {note}")?;
         }
-        check.print();
+        check.print()?;
     }
     if let Some(dir) = &a.plot {
         let records: Vec<FigureRecord> = loaded
@@ -1079,19 +1082,19 @@ impl ModelCheck {
 
     /// The warning of the table when the residual is not the records' noise, with the
     /// command that looks for the cause on the same records.
-    fn print(&self) {
+    fn print(&self) -> Result<()> {
         let diagnose = &self.diagnose;
         let Ok(Checked {
             findings: found, ..
         }) = &self.result
         else {
-            return;
+            return Ok(());
         };
         if found.is_empty() {
-            return;
+            return Ok(());
         }
         let shown = found.len().min(MODEL_CHECK_SHOWN);
-        println!(
+        outln!(
             "warning: the residual is not the records' noise: the model misses something they show ({} finding(s) at a family-wise false-alarm level of {:e}{}):",
             found.len(),
             LocaliseSettings::model_check().alpha,
@@ -1100,13 +1103,13 @@ impl ModelCheck {
             } else {
                 String::new()
             }
-        );
+        )?;
         for f in &found[..shown] {
-            println!("  {}", f.text);
+            outln!("  {}", f.text)?;
         }
-        println!(
+        outln!(
             "  The values and intervals above assume the model is complete: where the cause is an effect it lacks, they carry its bias beyond their intervals. `{diagnose}` looks for the effect and refits the motor with it."
-        );
+        )
     }
 }
 
