@@ -4,7 +4,7 @@
 //! the effect plus the measurement chain.
 
 use fit::diagnose::localise::{
-    localise, FindingKind, Localisation, LocaliseSettings, PhaseKind, ResidualChannel,
+    localise, FindingKind, FloorSource, Localisation, LocaliseSettings, PhaseKind, ResidualChannel,
     ResidualRecord,
 };
 use fit::{Channel, FitError};
@@ -274,6 +274,54 @@ fn ljung_box_passes_white_and_flags_ar1_residuals() {
                     .iter()
                     .any(|f| f.what == FindingKind::NotWhite));
             }
+        }
+    }
+}
+
+/// A noise-free record differs from its exact model by the integrator's error and the digits
+/// written, a smooth pattern far below any noise: it is not a gap. Before the floor was bounded
+/// by the precision, such a residual (2e-9 A on a record of amperes) read "not white" and a
+/// gap of 10 floors. An error of the same shape at 1e-3 of the signal is still found.
+#[test]
+fn a_noise_free_record_at_the_precision_of_its_model_shows_no_gap() {
+    let base = Simulated::step("base", 12.0, Effects::none(), 1);
+    let rms = {
+        let n = base.model_current.len() as f64;
+        let mean = base.model_current.iter().sum::<f64>() / n;
+        (base
+            .model_current
+            .iter()
+            .map(|v| (v - mean).powi(2))
+            .sum::<f64>()
+            / n)
+            .sqrt()
+    };
+    for (share, gap_expected) in [(1e-9, false), (1e-3, true)] {
+        let measured: Vec<f64> = base
+            .model_current
+            .iter()
+            .enumerate()
+            .map(|(i, m)| m + share * rms * (i as f64 / 40.0).sin())
+            .collect();
+        let rec = current_only(
+            "noise-free",
+            base.dt,
+            &base.voltage,
+            &measured,
+            &base.model_current,
+        );
+        let loc = localise(&[rec], &LocaliseSettings::default()).expect("localise");
+        let ch = &loc.records[0].channels[0];
+        assert_eq!(
+            loc.any_significant(),
+            gap_expected,
+            "error {share} of the RMS: {:?} {:?}",
+            ch.floor,
+            loc.significant_findings().first().map(|f| &f.text)
+        );
+        if !gap_expected {
+            assert_eq!(ch.floor.source, FloorSource::Precision, "{:?}", ch.floor);
+            assert!(!ch.whiteness.tested);
         }
     }
 }

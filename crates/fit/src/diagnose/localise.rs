@@ -20,6 +20,10 @@
 //!   so with `g = frac(m)(1 − frac(m))`: `vᵢ = q_s² g`, `wᵢ = q_s⁴ g (1 − 4g)` (exact for a
 //!   smooth motion; `Δθ²/(24 dt²)` on average, 0 at rest). `g` is floored at 0.01 and `w` at
 //!   `v²/2`.
+//! - An analog channel's `σ` is at least [`PRECISION_FLOOR`] (1e-6) of its signal's RMS about
+//!   its mean, the accuracy of the simulations and of six written digits
+//!   ([`FloorSource::Precision`]); a channel at that floor (a record simulated without noise)
+//!   has its pattern tests untested, as its error is the integrator's, not noise.
 //!
 //! The reported `σ_floor` is `√(mean vᵢ)` and the NRMSE floor `√(Σ vᵢ)/‖y − ȳ‖` (=
 //! `σ_floor √n/‖y − ȳ‖`); the gap is NRMSE − floor.
@@ -252,7 +256,18 @@ pub enum FloorSource {
     /// Given by the caller ([`localise_with_floors`]): e.g. the noise an inverse model's
     /// regressors and torque carry through its filters.
     Given,
+    /// [`PRECISION_FLOOR`] of the signal's RMS about its mean: a record without noise or
+    /// quantiser (a simulation written out exactly) differs from its exact model only by the
+    /// simulator's integration error and the digits written, which are neither noise nor a gap;
+    /// the channel's pattern tests are then untested.
+    Precision,
 }
+
+/// The smallest floor of a channel, as a share of its signal's RMS about its mean \[-\]: the
+/// accuracy of the diagnosis's simulations (about 1e-6 of the response,
+/// [`crate::diagnose::DiagnoseSettings::step_factor`]) and of values written to six
+/// significant digits.
+pub const PRECISION_FLOOR: f64 = 1e-6;
 
 /// The noise floor of one channel.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -279,6 +294,15 @@ pub struct NoiseFloor {
     /// ([`LocaliseSettings::dithered_steps`]): its floor is then at least half a step and its
     /// pattern tests are untested.
     pub undithered: bool,
+}
+
+impl NoiseFloor {
+    /// Whether the channel's error is noise that its pattern tests (spectrum, ripple,
+    /// whiteness, input correlation, trends) can judge: not an ADC the noise does not dither,
+    /// nor a record at [`FloorSource::Precision`].
+    pub fn patterns_testable(&self) -> bool {
+        !self.undithered && self.source != FloorSource::Precision
+    }
 }
 
 /// An excess test over a set of samples (see the module documentation).
@@ -1296,6 +1320,11 @@ fn floor_model(
             source = src;
         }
     }
+    let precision = PRECISION_FLOOR * (y_ss / n as f64).sqrt();
+    if precision > sigma {
+        sigma = precision;
+        source = FloorSource::Precision;
+    }
     let mut v = vec![sigma * sigma; n];
     let mut w = vec![2.0 * sigma.powi(4); n];
     let floor_of_all = nrmse_floor(&v);
@@ -1453,7 +1482,7 @@ fn localise_channel(
     // Tests of the residual's pattern (spectrum, whiteness, input correlation, ripple) need an
     // error that is noise: not an encoder's counts, nor a quantiser whose noise does not yet
     // dither it (module docs).
-    let pattern_tested = ch.kind != Channel::EncoderSpeed && !floor.report.undithered;
+    let pattern_tested = ch.kind != Channel::EncoderSpeed && floor.report.patterns_testable();
 
     let phase_alpha = family_alpha / phases.len().max(1) as f64;
     let phase_stats = phases
@@ -1647,7 +1676,7 @@ fn bands(
     let excess: Vec<f64> = used.iter().map(|&i| r[i] * r[i] - floor.v[i]).collect();
     let at: Vec<f64> = used.iter().map(|&i| ax[i]).collect();
     let wt: Vec<f64> = used.iter().map(|&i| floor.w[i]).collect();
-    let tested = !floor.report.undithered;
+    let tested = floor.report.patterns_testable();
     let trend = floor_slope(&excess, &at, &wt, c).map(|(slope, t)| {
         let p_value = (2.0 * normal_sf(t.abs())).min(1.0);
         Trend {
