@@ -216,6 +216,7 @@ pub fn nominal_gap(case: &CaseSpec, traces: &[Trace], settings: &DiagnoseSetting
     // would move them less far than they fell), then the model fitted on those instants.
     let located = locate_every_jump(
         &all,
+        0..all.len(),
         &case.motor,
         &Effects::none(),
         &sigmas,

@@ -431,29 +431,36 @@ fn record_block(n: usize, settings: &DiagnoseSettings) -> usize {
 /// the samples `keep` selects.
 fn nrmse_summary(channels: &[FittedChannel], keep: impl Fn(&FittedChannel, usize) -> bool) -> f64 {
     let (mut weighted, mut count) = (0.0, 0usize);
-    for ch in channels {
-        let idx: Vec<usize> = (0..ch.samples.len())
-            .filter(|&j| keep(ch, ch.samples[j]))
-            .collect();
-        if idx.len() < 2 {
-            continue;
-        }
-        let mean = idx.iter().map(|&j| ch.measured[j]).sum::<f64>() / idx.len() as f64;
-        let sst: f64 = idx.iter().map(|&j| (ch.measured[j] - mean).powi(2)).sum();
-        let sse: f64 = idx
-            .iter()
-            .map(|&j| (ch.measured[j] - ch.model[j]).powi(2))
-            .sum();
-        if sst > 0.0 {
-            weighted += (sse / sst).sqrt() * idx.len() as f64;
-            count += idx.len();
-        }
+    for (nrmse, samples) in channels.iter().filter_map(|ch| channel_nrmse(ch, &keep)) {
+        weighted += nrmse * samples as f64;
+        count += samples;
     }
     if count == 0 {
         f64::NAN
     } else {
         weighted / count as f64
     }
+}
+
+/// One channel's NRMSE over the samples `keep` selects, with their count; `None` when fewer
+/// than two are kept or the measurement is constant over them.
+fn channel_nrmse(
+    ch: &FittedChannel,
+    keep: impl Fn(&FittedChannel, usize) -> bool,
+) -> Option<(f64, usize)> {
+    let idx: Vec<usize> = (0..ch.samples.len())
+        .filter(|&j| keep(ch, ch.samples[j]))
+        .collect();
+    if idx.len() < 2 {
+        return None;
+    }
+    let mean = idx.iter().map(|&j| ch.measured[j]).sum::<f64>() / idx.len() as f64;
+    let sst: f64 = idx.iter().map(|&j| (ch.measured[j] - mean).powi(2)).sum();
+    let sse: f64 = idx
+        .iter()
+        .map(|&j| (ch.measured[j] - ch.model[j]).powi(2))
+        .sum();
+    (sst > 0.0).then(|| ((sse / sst).sqrt(), idx.len()))
 }
 
 /// The noise level `sigmas` gives record `record`'s `channel` (see [`channel_scales`]).
@@ -690,19 +697,18 @@ fn locate_jumps(
     any.then(|| Input::piecewise(&levels).ok()).flatten()
 }
 
-/// [`locate_jumps`] on every record of `records` for `motor` with `effects` (`None` where a
-/// record's jumps stay).
+/// [`locate_jumps`] on records `which` of `records` for `motor` with `effects` (entry 0 is
+/// record `which.start`; `None` where a record's jumps stay).
 pub(crate) fn locate_every_jump(
     records: &[ExcitedRecord<'_>],
+    which: std::ops::Range<usize>,
     motor: &MotorParams,
     effects: &Effects,
     sigmas: &[(usize, Channel, f64)],
     step_factor: f64,
 ) -> Vec<Option<Input>> {
-    records
-        .iter()
-        .enumerate()
-        .map(|(k, r)| locate_jumps(k, r, motor, effects, sigmas, step_factor))
+    which
+        .map(|k| locate_jumps(k, &records[k], motor, effects, sigmas, step_factor))
         .collect()
 }
 
@@ -1532,10 +1538,9 @@ fn absorbed_start(
     }
 }
 
-/// Records `which` of `grid` (entry 0 is record `which.start`) with their jumps located ([`locate_jumps`]) beside `motor` with
-/// `effects`, searched within the sample periods of `grid` (the records with their jumps where
-/// the voltage column puts them); a record whose jumps stay keeps `grid`'s
-/// ([`filled_from_grid`]).
+/// [`locate_every_jump`] on records `which` of `grid` (entry 0 is record `which.start`),
+/// searched within the sample periods of `grid` (the records with their jumps where the
+/// voltage column puts them); a record whose jumps stay keeps `grid`'s ([`filled_from_grid`]).
 fn located_inputs(
     grid: &[ExcitedRecord<'_>],
     which: std::ops::Range<usize>,
@@ -1544,10 +1549,14 @@ fn located_inputs(
     sigmas: &[(usize, Channel, f64)],
     settings: &DiagnoseSettings,
 ) -> Vec<Option<Input>> {
-    let located = which
-        .clone()
-        .map(|k| locate_jumps(k, &grid[k], motor, effects, sigmas, settings.step_factor))
-        .collect();
+    let located = locate_every_jump(
+        grid,
+        which.clone(),
+        motor,
+        effects,
+        sigmas,
+        settings.step_factor,
+    );
     filled_from_grid(located, &grid[which])
 }
 
@@ -1755,6 +1764,7 @@ pub fn diagnose(
     let grid = all.clone();
     let located = locate_every_jump(
         &all,
+        0..all.len(),
         &nominal.params,
         &Effects::none(),
         &sigmas,
@@ -2387,13 +2397,12 @@ fn run_stage(
     // nothing else refuses it (motor, intervals, effect), the tests judge it as any other.
     let base_as_bad = |fit: &FullFit, kind: EffectKind| {
         let unexplained = |q: &crate::ChannelQuality| {
-            let same: Vec<FittedChannel> = base
+            let before = base
                 .fitted
                 .iter()
-                .filter(|ch| ch.record == q.test && ch.channel == q.channel)
-                .cloned()
-                .collect();
-            let before = nrmse_summary(&same, train_mask);
+                .find(|ch| ch.record == q.test && ch.channel == q.channel)
+                .and_then(|ch| channel_nrmse(ch, train_mask))
+                .map_or(f64::NAN, |(nrmse, _)| nrmse);
             let after = 1.0 - q.nrmse_fit_percent / 100.0;
             before >= UNEXPLAINED_CHANNEL && after <= before + (1.0 - UNEXPLAINED_CHANNEL)
         };
