@@ -1512,7 +1512,10 @@ const START_CUTOFFS: [f64; 4] = [0.1, 0.02, 0.004, 0.0008];
 /// zero unless the filter is narrow, and a narrow filter distorts fast motors: so the estimate
 /// is made at cut-offs of 1/10, 1/50, 1/250 and 1/1250 of the sample rate and the one whose
 /// simulation fits the records best (output-error cost) is returned. Values the records cannot
-/// resolve (an L below one sample, no friction seen) are replaced by small positive ones.
+/// resolve (an L below one sample, no friction seen) are replaced by small positive ones; a J
+/// the torque equation gives as ≤ 0 (a torque ripple the regression does not hold, or too
+/// little acceleration) by the best, by the same cost, of mechanical time constants
+/// J / (f + k²/R) of 1/1000 to 1 times the longest record.
 pub fn equation_error_start(records: &[ExcitedRecord<'_>]) -> Result<MotorParams, FitError> {
     equation_error_start_with_initial_states(records, &[])
 }
@@ -1531,28 +1534,29 @@ pub fn equation_error_start_with_initial_states(
     let mut best: Option<(f64, MotorParams)> = None;
     let mut first_error = None;
     for fraction in START_CUTOFFS {
-        match equation_error_estimate(records, fraction) {
-            Ok(start) => {
-                if problem.set_step_for(&start, &Effects::none()).is_none() {
-                    first_error.get_or_insert(bad(
-                        "records",
-                        format!(
-                            "the equation-error estimate (R {:.3e} Ω, L {:.3e} H) has a time constant far below the sample period",
-                            start.r_ohm, start.l_henry
-                        ),
-                    ));
-                    continue;
-                }
-                let theta =
-                    problem.with_state_guesses(start.values().iter().map(|v| v.ln()).collect());
-                debug_assert_eq!(theta.len(), problem.parameters.len());
-                let cost = problem.cost(&theta).unwrap_or(f64::INFINITY);
-                if best.as_ref().is_none_or(|(c, _)| cost < *c) {
-                    best = Some((cost, start));
-                }
-            }
+        let starts = match equation_error_estimate(records, fraction) {
+            Ok(starts) => starts,
             Err(e) => {
                 first_error.get_or_insert(e);
+                continue;
+            }
+        };
+        for start in starts {
+            if problem.set_step_for(&start, &Effects::none()).is_none() {
+                first_error.get_or_insert(bad(
+                    "records",
+                    format!(
+                        "the equation-error estimate (R {:.3e} Ω, L {:.3e} H) has a time constant far below the sample period",
+                        start.r_ohm, start.l_henry
+                    ),
+                ));
+                continue;
+            }
+            let theta = problem.with_state_guesses(start.values().iter().map(|v| v.ln()).collect());
+            debug_assert_eq!(theta.len(), problem.parameters.len());
+            let cost = problem.cost(&theta).unwrap_or(f64::INFINITY);
+            if best.as_ref().is_none_or(|(c, _)| cost < *c) {
+                best = Some((cost, start));
             }
         }
     }
@@ -1661,11 +1665,12 @@ fn electrical_estimate(
 
 /// One equation-error estimate with the electrical signals low-passed at `fraction` of the
 /// sample rate (the angle at a fifth of that, with decimation by 5, or less on records too
-/// short for twenty rows at 5).
+/// short for twenty rows at 5): one start, or several differing only in J when the torque
+/// equation leaves J unresolved.
 fn equation_error_estimate(
     records: &[ExcitedRecord<'_>],
     fraction: f64,
-) -> Result<MotorParams, FitError> {
+) -> Result<Vec<MotorParams>, FitError> {
     let domain = |reason: String| FitError::MethodDomain {
         equation: "equation-error start (Eq. (2))",
         reason,
@@ -1717,19 +1722,42 @@ fn equation_error_estimate(
         coulomb_n: ts,
         ..
     } = mechanical.axis;
-    if !(j > 0.0 && j.is_finite()) {
-        return Err(domain(format!(
-            "J = {j:.4e} kg·m² from the torque equation: the records show too little acceleration"
-        )));
-    }
     let f = if f > 0.0 { f } else { 1e-3 * k * k / r };
     let peak_torque = records
         .iter()
         .flat_map(|r| r.current.iter())
         .fold(0.0f64, |m, i| m.max((k * i).abs()));
     let ts = if ts > 0.0 { ts } else { 1e-3 * peak_torque };
-    MotorParams::new(r, l, k, f, j, ts).map_err(FitError::model("equation-error start (Eq. (2))"))
+    let motor = |j: f64| {
+        MotorParams::new(r, l, k, f, j, ts)
+            .map_err(FitError::model("equation-error start (Eq. (2))"))
+    };
+    if j > 0.0 && j.is_finite() {
+        return Ok(vec![motor(j)?]);
+    }
+    // A J the torque equation cannot resolve (a torque ripple or a load the regression does
+    // not hold, against too little acceleration): one J per mechanical time constant
+    // J / (f + k²/R) of UNRESOLVED_J_SPANS times the longest record, for the caller's costs.
+    let span = records
+        .iter()
+        .map(|r| r.dt * r.current.len().saturating_sub(1) as f64)
+        .fold(0.0, f64::max);
+    let damping = f + k * k / r;
+    let starts: Vec<MotorParams> = UNRESOLVED_J_SPANS
+        .iter()
+        .filter_map(|share| motor(share * span * damping).ok())
+        .collect();
+    if starts.is_empty() {
+        return Err(domain(format!(
+            "J = {j:.4e} kg·m² from the torque equation: the records show too little acceleration"
+        )));
+    }
+    Ok(starts)
 }
+
+/// Mechanical time constants tried by [`equation_error_start`] when the torque equation
+/// gives no positive J, as shares of the longest record \[-\].
+const UNRESOLVED_J_SPANS: [f64; 4] = [1e-3, 1e-2, 1e-1, 1.0];
 
 #[cfg(test)]
 mod tests {

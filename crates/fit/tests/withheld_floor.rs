@@ -13,8 +13,9 @@
 //!
 //! Two more tests diagnose one case each of the 160 that a screening or refit rule used to miss,
 //! as they were found: sized against the true nominal motor (`motor_model::withheld::
-//! benchmark_case`), before the benchmark's cases were sized on the gap; three more, one case
-//! each sized on the gap, that the held-out blocks and the jump instants used to miss.
+//! benchmark_case`), before the benchmark's cases were sized on the gap; more, one case each
+//! sized on the gap, that the held-out blocks, the jump instants, the nominal fit's start and
+//! the thermal drift's start used to miss, and one whose equation-error start failed.
 
 use fit::diagnose::benchmark::{calibrated_case, run_case, CaseOutcome, Summary};
 use fit::diagnose::DiagnoseSettings;
@@ -133,6 +134,18 @@ fn a_cogging_torque_behind_a_nominal_fit_that_lost_l_is_named_once_the_fit_resta
     // showed anything beside it and the verdict was `none`. Refitted from L/R at half a
     // sample period, the nominal model's NRMSE is 0.12 and the cogging torque is named.
     assert_named_calibrated(25, "cogging_torque");
+}
+
+#[test]
+fn records_whose_torque_equation_gives_no_positive_j_are_still_diagnosed() {
+    // Case 88 of seed 1's 160, sized on the gap: a cogging torque of three harmonics, 8 noise
+    // floors on the low step. The equation-error start's torque equation gave J = -2.6e-7
+    // kg·m², and the diagnosis failed before it began. The start now takes J from the
+    // mechanical time constant whose simulation fits the records best.
+    let settings = DiagnoseSettings::default();
+    let case = calibrated_case(SEED, 88, 160, &settings).expect("a case of the benchmark");
+    let outcome = run_case(&case, &settings);
+    assert!(outcome.named.is_ok(), "{outcome:?}");
 }
 
 /// [`assert_named`] on case `index` of seed 1's 160 sized on the gap the nominal model leaves
