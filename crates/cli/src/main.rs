@@ -143,7 +143,7 @@ fn main() -> ExitCode {
     match outcome {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            eprintln!("error: {err:#}");
+            crate::output::errln!("error: {err:#}");
             if err.chain().any(|e| e.is::<BadInput>()) {
                 ExitCode::from(EXIT_BAD_INPUT)
             } else if err.chain().any(|e| e.is::<NotConverged>()) {

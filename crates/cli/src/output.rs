@@ -18,6 +18,7 @@
 //! A command's report goes to standard output through [`outln!`], which returns a failure to
 //! write (a full disk, a closed descriptor) as an error instead of panicking as `println!`
 //! does; a reader that goes away (`| head`) still ends the process quietly by SIGPIPE.
+//! Messages go to standard error through [`errln!`], which drops what cannot be written.
 
 use std::ffi::OsString;
 use std::fs::{File, OpenOptions, Permissions};
@@ -53,6 +54,33 @@ macro_rules! outln {
     };
 }
 pub(crate) use outln;
+
+/// Writes `args` to standard error, ignoring a failure: a message that cannot be written
+/// (`2>/dev/full`, a closed descriptor) has nowhere else to go, and the exit code still says
+/// how the command ended. Called through [`errln!`] and [`errprint!`].
+pub fn stderr_text(args: std::fmt::Arguments<'_>) {
+    let mut err = std::io::stderr().lock();
+    let _ = err.write_fmt(args).and_then(|()| err.flush());
+}
+
+/// `eprintln!` that does not panic when standard error cannot be written ([`stderr_text`]).
+macro_rules! errln {
+    () => {
+        $crate::output::stderr_text(format_args!("\n"))
+    };
+    ($($arg:tt)*) => {
+        $crate::output::stderr_text(format_args!("{}\n", format_args!($($arg)*)))
+    };
+}
+pub(crate) use errln;
+
+/// `eprint!` that does not panic when standard error cannot be written ([`stderr_text`]).
+macro_rules! errprint {
+    ($($arg:tt)*) => {
+        $crate::output::stderr_text(format_args!($($arg)*))
+    };
+}
+pub(crate) use errprint;
 
 /// An output path named on the command line, for [`check`].
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -137,7 +137,7 @@ const MIN_ZERO_RAIL_SAMPLES: usize = 20;
 fn warn(warnings: &[String], quiet: bool) {
     if !quiet {
         for w in warnings {
-            eprintln!("{w}");
+            crate::output::errln!("{w}");
         }
     }
 }

@@ -115,6 +115,64 @@ fn no_effect_named_on_a_nominal_model_that_is_not_a_result_exits_3() {
 }
 
 #[test]
+fn steps_on_a_sample_instant_after_pre_trigger_samples_leave_no_gap() {
+    // A logger steps the voltage on its own clock: the jump falls on a sample, the last
+    // instant of the period the voltage column allows. The records' voltage is read with each
+    // jump half a period before its first sample; the jump search stopped there, half a period
+    // early, the nominal fit bent L by 9 % to match, and the diagnosis reported a gap of 76
+    // noise floors on records without any effect (or named a sensor lag on noise-free ones).
+    let dir = scratch("diagnose_on_sample");
+    let motor = dir.join("m.json");
+    std::fs::write(
+        &motor,
+        r#"{"R":2.0,"L":0.002,"k":0.05,"f":1e-5,"J":2e-5,"Ts":0.004}"#,
+    )
+    .unwrap();
+    let paths = [("12", "1"), ("1", "2")].map(|(volts, seed)| {
+        let path = dir.join(format!("s{volts}.csv"));
+        common::simulate_to(
+            &path,
+            &[
+                "--motor",
+                motor.to_str().unwrap(),
+                "--voltage",
+                volts,
+                "--step-at",
+                "0.05",
+                "--duration",
+                "0.6",
+                "--rate",
+                "5000",
+                "--adc-bits",
+                "12",
+                "--noise-lsb",
+                "1",
+                "--seed",
+                seed,
+                "--quiet",
+            ],
+        );
+        path.to_str().unwrap().to_string()
+    });
+    let out = motorid(&[
+        "diagnose", "--high", &paths[0], "--low", &paths[1], "--json", "--quiet",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let report: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
+    assert_eq!(report["verdict"], "none", "{report:#}");
+    assert_eq!(report["findings"], serde_json::json!([]), "{report:#}");
+    let l = report["nominal"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["name"] == "L")
+        .unwrap()["value"]
+        .as_f64()
+        .unwrap();
+    assert!((l / 0.002 - 1.0).abs() < 0.02, "L = {l}");
+}
+
+#[test]
 fn bad_input_is_refused_naming_the_file() {
     assert_bad_input(&["diagnose"], "diagnose needs records");
     assert_bad_input(
@@ -183,6 +241,32 @@ fn a_training_record_given_as_held_out_data_is_refused() {
         assert_bad_input(
             &["diagnose", "--record", &high, "--validate", link],
             &format!("--validate {link}: the same file as --record {high}"),
+        );
+        // A hard link: the same device and inode.
+        let hard = dir.join("hard.csv");
+        std::fs::hard_link(&low, &hard).unwrap();
+        let hard = hard.to_str().unwrap();
+        assert_bad_input(
+            &[
+                "diagnose",
+                "--high",
+                &high,
+                "--low",
+                &low,
+                "--validate",
+                hard,
+            ],
+            &format!("--validate {hard}: the same file as --low {low}; {held_out}"),
+        );
+        // A training record given twice.
+        let twice = "each record counts once: give each file once";
+        assert_bad_input(
+            &["diagnose", "--high", &low, "--low", hard],
+            &format!("--low {hard}: the same file as --high {low}; {twice}"),
+        );
+        assert_bad_input(
+            &["diagnose", "--record", &low, "--record", other_path],
+            &format!("--record {other_path}: the same file as --record {low}; {twice}"),
         );
     }
     // A path that does not resolve: compared as given, before it is read.

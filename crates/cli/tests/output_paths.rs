@@ -242,6 +242,47 @@ fn a_report_to_a_full_standard_output_is_an_error_not_a_panic() {
     }
 }
 
+/// Messages (progress, warnings, the error line) to a standard error that cannot be written
+/// are dropped: the exit code still says how the command ended, and nothing panics (exit 101
+/// before, from `eprintln!`).
+#[test]
+fn messages_to_a_full_standard_error_do_not_end_the_command() {
+    if !Path::new("/dev/full").exists() {
+        eprintln!("skipped: no /dev/full here");
+        return;
+    }
+    let dir = scratch("stderr-full");
+    let out_csv = dir.join("x.csv");
+    let out_csv = out_csv.to_str().unwrap();
+    for (args, code) in [
+        (
+            vec![
+                "simulate",
+                "--voltage",
+                "12",
+                "--duration",
+                "0.1",
+                "-o",
+                out_csv,
+            ],
+            0,
+        ),
+        (vec!["model", "--motor", "no-such.json"], 2),
+    ] {
+        let full = std::fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/full")
+            .unwrap();
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_motorid"))
+            .args(&args)
+            .stderr(Stdio::from(full))
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(code), "{args:?}");
+    }
+    assert!(Path::new(out_csv).is_file());
+}
+
 /// A tmpfs mounted for the test, unmounted when dropped.
 struct Mounted(PathBuf);
 

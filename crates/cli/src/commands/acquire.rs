@@ -182,16 +182,16 @@ impl Progress {
             self.started.elapsed().as_secs_f64()
         );
         if self.terminal {
-            eprint!("\r{line}   ");
+            crate::output::errprint!("\r{line}   ");
         } else {
-            eprintln!("{line}");
+            crate::output::errln!("{line}");
         }
     }
 
     /// Ends a rewritten line.
     fn finish(&self) {
         if self.terminal {
-            eprintln!();
+            crate::output::errln!();
         }
     }
 }
@@ -319,7 +319,7 @@ pub fn run(a: &Settings) -> Result<()> {
     ];
     write_file(&a.output, &record, &meta)?;
     let s = &acquired.stats;
-    eprintln!(
+    crate::output::errln!(
         "wrote {} samples ({} s at {} Hz) to {}; {} bytes, {} frames, {} failed their check, {} lost, {} retries",
         record.t.len(),
         plan.duration_s,

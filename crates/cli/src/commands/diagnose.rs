@@ -70,31 +70,46 @@ fn candidates(a: &DiagnoseArgs) -> Result<Vec<EffectKind>> {
     Ok(kinds)
 }
 
-/// Whether `a` and `b` name the same file: their canonical paths where both resolve (links,
-/// `./`, `..`), else the paths as given (`/dev/stdin` twice).
+/// Whether `a` and `b` name the same file: the same device and inode where both exist (links
+/// symbolic or hard, `./`, `..`), else the paths as given (`/dev/stdin` twice).
 fn same_file(a: &Path, b: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if let (Ok(x), Ok(y)) = (std::fs::metadata(a), std::fs::metadata(b)) {
+            return (x.dev(), x.ino()) == (y.dev(), y.ino());
+        }
+    }
     match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
         (Ok(a), Ok(b)) => a == b,
         _ => a == b,
     }
 }
 
-/// Refuses a `--validate` record that is also a training record (`--high`, `--low`,
-/// `--record`): judged on data it was fitted to, a candidate would look better than it is.
-fn held_out_differs(a: &DiagnoseArgs) -> Result<()> {
-    let training: Vec<(&str, &PathBuf)> = a
+/// Refuses a record file given twice among `--high`, `--low`, `--record` and `--validate`: a
+/// `--validate` record that is also a training record would judge a candidate on data it was
+/// fitted to, and a training record given twice (`--high X --low X`) counts its samples twice
+/// and is no step pair.
+fn distinct_records(a: &DiagnoseArgs) -> Result<()> {
+    let given: Vec<(&str, &PathBuf)> = a
         .high
         .iter()
         .map(|p| ("--high", p))
         .chain(a.low.iter().map(|p| ("--low", p)))
         .chain(a.records.iter().map(|p| ("--record", p)))
+        .chain(a.validate.iter().map(|p| ("--validate", p)))
         .collect();
-    for held_out in &a.validate {
-        if let Some((flag, path)) = training.iter().find(|(_, p)| same_file(p, held_out)) {
+    for (k, (flag, path)) in given.iter().enumerate() {
+        if let Some((first, earlier)) = given[..k].iter().find(|(_, p)| same_file(p, path)) {
+            let what = if *flag == "--validate" && *first != "--validate" {
+                "held-out data must differ from training data: give a record not used for training"
+            } else {
+                "each record counts once: give each file once"
+            };
             return Err(BadInput(format!(
-                "--validate {}: the same file as {flag} {}; held-out data must differ from training data: give a record not used for training",
-                held_out.display(),
-                path.display()
+                "{flag} {}: the same file as {first} {}; {what}",
+                path.display(),
+                earlier.display()
             ))
             .into());
         }
@@ -116,7 +131,7 @@ pub fn settings(a: &DiagnoseArgs) -> Result<Settings> {
         )
         .into());
     }
-    held_out_differs(a)?;
+    distinct_records(a)?;
     let candidates = candidates(a)?;
     if a.max_effects == 0 {
         return Err(BadInput("--max-effects 0: give 1 or more".into()).into());
@@ -150,7 +165,7 @@ fn current_settings(a: &DiagnoseArgs) -> Result<Settings> {
         )
         .into());
     }
-    held_out_differs(a)?;
+    distinct_records(a)?;
     let Some(k) = a.torque_constant else {
         return Err(BadInput(
             "diagnose --input current needs --torque-constant K (the torque or force per unit of the current column)".into(),
@@ -265,14 +280,18 @@ pub fn run(s: &Settings) -> Result<()> {
         }
         match p {
             DiagnoseProgress::Nominal => {
-                eprintln!("diagnose: fitting the nominal model ({elapsed:.1} s)")
+                crate::output::errln!("diagnose: fitting the nominal model ({elapsed:.1} s)")
             }
             DiagnoseProgress::Screening { stage } => {
-                eprintln!("diagnose: effect {stage}: screening the candidates ({elapsed:.1} s)")
+                crate::output::errln!(
+                    "diagnose: effect {stage}: screening the candidates ({elapsed:.1} s)"
+                )
             }
-            DiagnoseProgress::Candidates { stage, done, total } if done > 0 => eprintln!(
-                "diagnose: effect {stage}: {done}/{total} candidates refitted ({elapsed:.1} s)"
-            ),
+            DiagnoseProgress::Candidates { stage, done, total } if done > 0 => {
+                crate::output::errln!(
+                    "diagnose: effect {stage}: {done}/{total} candidates refitted ({elapsed:.1} s)"
+                )
+            }
             DiagnoseProgress::Candidates { .. } => {}
         }
     };

@@ -93,7 +93,7 @@ pub fn run(a: &Settings) -> Result<()> {
     // Flushed at once ([`outln!`]): a client reads the name before connecting.
     outln!("PTY {path}")?;
     if !a.quiet {
-        eprintln!("emulated logger on {path} (115200 baud 8N1); Ctrl-C stops it");
+        crate::output::errln!("emulated logger on {path} (115200 baud 8N1); Ctrl-C stops it");
     }
     // The slave stays open here, so that the master keeps working between clients.
     let _slave = slave;
@@ -109,7 +109,7 @@ pub fn run(a: &Settings) -> Result<()> {
         let out = emulator.run(Duration::from_millis(20));
         if let Some(error) = emulator.take_error() {
             if !a.quiet {
-                eprintln!("warning: the simulation refused the test: {error}");
+                crate::output::errln!("warning: the simulation refused the test: {error}");
             }
         }
         if !out.is_empty() {
@@ -120,7 +120,7 @@ pub fn run(a: &Settings) -> Result<()> {
         if emulator.line_closed() {
             // The `close` fault: the port goes away, as when a cable is pulled.
             if !a.quiet {
-                eprintln!("the line is closed (--faults close): stopping");
+                crate::output::errln!("the line is closed (--faults close): stopping");
             }
             return Ok(());
         }

@@ -169,7 +169,7 @@ pub fn run(a: &Settings) -> Result<()> {
             if a.quiet {
                 return Ok(());
             }
-            eprintln!(
+            crate::output::errln!(
                 "wrote {} samples ({} s at {} Hz) to {}{}",
                 record.t.len(),
                 a.duration_s,

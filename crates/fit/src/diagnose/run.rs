@@ -673,7 +673,8 @@ fn locate_jumps(
         };
         let (mut c, mut d) = (b - golden * (b - a), a + golden * (b - a));
         let (mut fc, mut fd) = (at(c), at(d));
-        let f_end = at(b);
+        let end = b;
+        let f_end = at(end);
         if !(fc.is_finite() || fd.is_finite() || f_end.is_finite()) {
             return None;
         }
@@ -693,8 +694,11 @@ fn locate_jumps(
             }
         }
         let (best, f_best) = if fc < fd { (c, fc) } else { (d, fd) };
-        if f_best < f_end {
-            levels[j].0 = best;
+        // At the bracket's end unless inside is better: the end is the first sample showing
+        // the jump, where a level put earlier ([`jump_bracket`]) does not start.
+        let at_best = if f_best < f_end { best } else { end };
+        if (at_best - levels[j].0).abs() > 1e-9 * dt {
+            levels[j].0 = at_best;
             any = true;
         }
     }
@@ -1026,13 +1030,20 @@ fn jump_columns(
     Some(columns)
 }
 
-/// Where jump `j` of `levels` (a record's voltage as the voltage column puts it, each jump on
-/// the first sample showing it) can have fallen: within the sample period before that sample,
-/// and half a period after the jump before, or, for the first, just after the record's start
-/// (a step on the first sample after the trigger can fall anywhere before it; the level a
-/// record starts at is not a jump). `(lo, hi)` \[s\]; empty when `lo ≥ hi`.
+/// Where jump `j` of `levels` (a record's voltage as the voltage column puts it: each jump on
+/// the first sample showing it, as [`crate::voltage_input`] gives it, or half a period before
+/// it, as [`crate::voltage_levels`] does) can have fallen: within the sample period before the
+/// first sample showing it, and half a period after the jump before, or, for the first, just
+/// after the record's start (a step on the first sample after the trigger can fall anywhere
+/// before it; the level a record starts at is not a jump). `(lo, hi)` \[s\]; empty when
+/// `lo ≥ hi`. Taken from the level's own start instead of that sample, a jump put half a
+/// period early could not reach the later half of its period: `motorid diagnose` located a
+/// step on a sample instant (a logger that steps on its clock) half a period early, and the
+/// nominal fit bent L by 9 % to match.
 fn jump_bracket(levels: &[(f64, f64)], j: usize, dt: f64) -> (f64, f64) {
-    let hi = levels[j].0;
+    // The nearest sample to a quarter of a period after the level's start: the first sample
+    // showing it for either convention, within a quarter period of a time column's jitter.
+    let hi = (levels[j].0 / dt + 0.25).round() * dt;
     let after = match j.checked_sub(1).and_then(|i| levels.get(i)) {
         Some(l) if l.0 > 0.0 => l.0 + 0.5 * dt,
         _ => FIRST_JUMP_MARGIN * dt,

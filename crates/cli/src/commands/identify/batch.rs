@@ -289,7 +289,7 @@ pub fn run(a: &Settings, dir: &Path) -> Result<()> {
     let threads = parallel::threads(n);
     let started = std::time::Instant::now();
     if !a.quiet {
-        eprintln!("identifying {n} motors on {threads} threads…");
+        crate::output::errln!("identifying {n} motors on {threads} threads…");
     }
     let progress = Jobs::new(n, "motors", a.quiet);
     let rows = parallel::map(

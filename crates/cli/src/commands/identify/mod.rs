@@ -505,7 +505,7 @@ fn run_steady(a: &Settings, paths: &[PathBuf], r: f64, k: f64) -> Result<()> {
         )?;
         if !a.quiet {
             for p in paths {
-                eprintln!("wrote {}", p.display());
+                crate::output::errln!("wrote {}", p.display());
             }
         }
     }
@@ -638,7 +638,7 @@ fn run_current(a: &Settings, paths: &[PathBuf]) -> Result<()> {
         )?;
         if !a.quiet {
             for p in written {
-                eprintln!("wrote {}", p.display());
+                crate::output::errln!("wrote {}", p.display());
             }
         }
     }
@@ -748,17 +748,17 @@ pub fn run(a: &Settings) -> Result<()> {
             "the step methods need records that start at rest ({why}): both records are fitted whole by output error"
         );
         if !a.quiet && !a.json {
-            eprintln!("note: {note}");
+            crate::output::errln!("note: {note}");
         }
         drop(phases);
         return run_output_error(a, &[high.clone(), low.clone()], Some(&note));
     }
     if !a.quiet {
         if let Some(note) = swapped {
-            eprintln!("note: {note}");
+            crate::output::errln!("note: {note}");
         }
         for s in [&hv, &lv].into_iter().filter(|s| s.mirrored) {
-            eprintln!(
+            crate::output::errln!(
                 "note: {}: a negative step ({} V), fitted as its mirror image (the model is odd in E, I and the speed)",
                 s.label, -s.volts
             );
