@@ -24,6 +24,38 @@ fn diagnose_json(high: &str, low: &str) -> serde_json::Value {
     serde_json::from_str(&stdout(&out)).expect("one JSON object")
 }
 
+/// Two steps (`volts`, seeds 1 and 2) of the motor `motor_json`, 12-bit with 1 LSB of noise
+/// and `timing` (duration, rate, step instant), written into `dir`: their paths.
+fn motor_steps(
+    dir: &std::path::Path,
+    motor_json: &str,
+    volts: [&str; 2],
+    timing: &[&str],
+) -> [String; 2] {
+    let motor = dir.join("m.json");
+    std::fs::write(&motor, motor_json).unwrap();
+    let seeds = ["1", "2"];
+    std::array::from_fn(|k| {
+        let path = dir.join(format!("s{}.csv", volts[k]));
+        let mut args = vec![
+            "--motor",
+            motor.to_str().unwrap(),
+            "--voltage",
+            volts[k],
+            "--adc-bits",
+            "12",
+            "--noise-lsb",
+            "1",
+            "--seed",
+            seeds[k],
+            "--quiet",
+        ];
+        args.extend_from_slice(timing);
+        common::simulate_to(&path, &args);
+        path.to_str().unwrap().to_string()
+    })
+}
+
 #[test]
 fn a_withheld_quadratic_drag_is_named_with_its_size() {
     let dir = scratch("diagnose_drag");
@@ -70,36 +102,12 @@ fn no_effect_named_on_a_nominal_model_that_is_not_a_result_exits_3() {
     // no interval can be computed (as `identify` refuses it), and no effect is named. The
     // report is printed, and the verdict `none` is refused with the reason: exit 3.
     let dir = scratch("diagnose_not_a_result");
-    let motor = dir.join("m.json");
-    std::fs::write(
-        &motor,
+    let paths = motor_steps(
+        &dir,
         r#"{"R":2.0,"L":0.002,"k":0.05,"f":1e-12,"J":2e-5,"Ts":0.004}"#,
-    )
-    .unwrap();
-    let paths = [("12", "1"), ("3", "2")].map(|(volts, seed)| {
-        let path = dir.join(format!("s{volts}.csv"));
-        common::simulate_to(
-            &path,
-            &[
-                "--motor",
-                motor.to_str().unwrap(),
-                "--voltage",
-                volts,
-                "--duration",
-                "0.3",
-                "--rate",
-                "2000",
-                "--adc-bits",
-                "12",
-                "--noise-lsb",
-                "1",
-                "--seed",
-                seed,
-                "--quiet",
-            ],
-        );
-        path.to_str().unwrap().to_string()
-    });
+        ["12", "3"],
+        &["--duration", "0.3", "--rate", "2000"],
+    );
     let out = motorid(&["diagnose", "--high", &paths[0], "--low", &paths[1]]);
     assert_eq!(out.status.code(), Some(3), "{}", stderr(&out));
     assert!(
@@ -122,38 +130,12 @@ fn steps_on_a_sample_instant_after_pre_trigger_samples_leave_no_gap() {
     // early, the nominal fit bent L by 9 % to match, and the diagnosis reported a gap of 76
     // noise floors on records without any effect (or named a sensor lag on noise-free ones).
     let dir = scratch("diagnose_on_sample");
-    let motor = dir.join("m.json");
-    std::fs::write(
-        &motor,
+    let paths = motor_steps(
+        &dir,
         r#"{"R":2.0,"L":0.002,"k":0.05,"f":1e-5,"J":2e-5,"Ts":0.004}"#,
-    )
-    .unwrap();
-    let paths = [("12", "1"), ("1", "2")].map(|(volts, seed)| {
-        let path = dir.join(format!("s{volts}.csv"));
-        common::simulate_to(
-            &path,
-            &[
-                "--motor",
-                motor.to_str().unwrap(),
-                "--voltage",
-                volts,
-                "--step-at",
-                "0.05",
-                "--duration",
-                "0.6",
-                "--rate",
-                "5000",
-                "--adc-bits",
-                "12",
-                "--noise-lsb",
-                "1",
-                "--seed",
-                seed,
-                "--quiet",
-            ],
-        );
-        path.to_str().unwrap().to_string()
-    });
+        ["12", "1"],
+        &["--step-at", "0.05", "--duration", "0.6", "--rate", "5000"],
+    );
     let out = motorid(&[
         "diagnose", "--high", &paths[0], "--low", &paths[1], "--json", "--quiet",
     ]);
