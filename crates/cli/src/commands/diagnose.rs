@@ -482,7 +482,14 @@ fn print_report(d: &Report<'_>, seconds: f64) -> Result<()> {
                     .map(|m| format!("{} {:+.1} %", m.name, 100.0 * m.relative))
                     .collect();
                 outln!(
-                    "Verdict: {name} ({size}). Modelled, it cuts the held-out NRMSE from {:.4} to {:.4} (training {:.4} → {:.4}).{} To do: {}.",
+                    "Verdict: {name} ({size}). Modelled, it {} the held-out NRMSE from {:.4} to {:.4} (training {:.4} → {:.4}).{} To do: {}.",
+                    // The test weighs each channel by its noise, the NRMSE summary by its
+                    // signal: the two can disagree.
+                    if c.heldout_nrmse_after < c.heldout_nrmse_before {
+                        "cuts"
+                    } else {
+                        "moves"
+                    },
                     c.heldout_nrmse_before,
                     c.heldout_nrmse_after,
                     c.train_nrmse_before,
@@ -514,6 +521,9 @@ fn print_report(d: &Report<'_>, seconds: f64) -> Result<()> {
         }
         _ if d.localisation.any_significant() => outln!(
             "Verdict: none — no candidate effect improves the held-out data significantly, yet the nominal model misses by more than the noise floor (where: below): the cause is outside the candidates, or a candidate fitted against its physics."
+        )?,
+        _ if d.nominal_note.is_some() => outln!(
+            "Verdict: none — no candidate effect improves the held-out data significantly, and the nominal model, though within the records' noise, is not a result (below)."
         )?,
         _ => outln!(
             "Verdict: none — no candidate effect improves the held-out data significantly: the nominal model explains the records to within their noise."
