@@ -7,7 +7,8 @@
 //! cargo run --release -p fit --example withheld_benchmark -- [SEED] [N] [CASE]
 //! ```
 //!
-//! With CASE, only that case is diagnosed and every candidate of every stage printed.
+//! With CASE, only that case is diagnosed and every candidate of every stage printed. With
+//! `WITHHELD_CASES=3,15,66`, only the cases listed are diagnosed and scored.
 //!
 //! The cases are `fit::diagnose::benchmark::calibrated_case`'s: each effect sized on the gap
 //! the nominal model cannot absorb (`nominal_gap`). With `WITHHELD_PLAIN=1` they are
@@ -47,6 +48,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     {
         // Rounds of refits at most (1: the best `refits` candidates alone).
         settings.refit_rounds = n;
+    }
+    if let Some(n) = std::env::var("WITHHELD_REFITS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+    {
+        // Candidates refitted in full at each stage (the best by screening score).
+        settings.refits = n;
     }
     if std::env::var_os("WITHHELD_REFIT_ALL").is_some() {
         // Every candidate refitted, whatever its screening score.
@@ -187,7 +195,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seen_too = std::env::var_os("WITHHELD_SEEN").is_some();
     let mut seen: Vec<Option<f64>> = Vec::with_capacity(n);
     let mut outcomes: Vec<CaseOutcome> = Vec::with_capacity(n);
+    // With WITHHELD_CASES=3,15,66 only those cases (of the N generated) are diagnosed.
+    let only: Option<Vec<usize>> = std::env::var("WITHHELD_CASES")
+        .ok()
+        .map(|s| s.split(',').filter_map(|x| x.trim().parse().ok()).collect());
     for i in 0..n {
+        if only.as_ref().is_some_and(|o| !o.contains(&i)) {
+            continue;
+        }
         let case = case_of(i)?;
         let o = run_case(&case, &settings);
         // A case sized on the gap stores it as its visibility.
@@ -208,7 +223,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             )
         });
         println!(
-            "{:>4}  truth {:<45} named {:<45} ratio {:>6}  {:.1} s{}{after_text}",
+            "{:>4}  truth {:<45} named {:<45} ratio {:>6} gap {:>6}  {:.1} s{}{after_text}",
             i,
             o.truth.join("+"),
             match &o.named {
@@ -217,11 +232,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 Err(_) => "failed".to_string(),
             },
             o.heldout_ratio.map_or("-".into(), |r| format!("{r:.3}")),
+            o.heldout_gap_ratio
+                .map_or("-".into(), |r| format!("{r:.3}")),
             o.seconds,
             o.named
                 .as_ref()
                 .err()
                 .map_or(String::new(), |e| format!("  ({e})"))
+                + &if o.ambiguous_with.is_empty() {
+                    String::new()
+                } else {
+                    format!("  (ambiguous with {})", o.ambiguous_with.join(", "))
+                }
         );
         outcomes.push(o);
     }
@@ -259,7 +281,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         println!();
     }
     println!(
-        "\nseed {seed}, {} cases: top-1 accuracy {:.1} %, false alarms on none {}/{}, both named {}/{}, median held-out NRMSE after/before {:.3}, failed {}, median {:.1} s a case",
+        "\nseed {seed}, {} cases: top-1 accuracy {:.1} %, false alarms on none {}/{}, both named {}/{}, median held-out NRMSE after/before {:.3}, median held-out gap after/before {:.3}, failed {}, median {:.1} s a case",
         s.cases,
         100.0 * s.top1_accuracy,
         s.false_alarms.0,
@@ -267,6 +289,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         s.both_named.0,
         s.both_named.1,
         s.median_heldout_ratio,
+        s.median_heldout_gap_ratio,
         s.failed,
         s.median_seconds
     );

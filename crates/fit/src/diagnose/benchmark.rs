@@ -13,16 +13,17 @@
 //! Scores ([`Summary`]): the confusion matrix of the truth against the top-ranked verdict
 //! (cases with one effect or none), the top-1 accuracy (the first effect named is one present,
 //! or `none` for `none`; every case), false alarms on `none`, the share of two-effect cases
-//! with both named, and the median held-out NRMSE after/before of correctly named effects.
+//! with both named, and the median held-out NRMSE after/before of correctly named effects, and
+//! of their held-out gap (the NRMSE above the noise floor) after/before.
 
-use motor_model::withheld::{benchmark_case_with_gap, generate, CaseRecords, CaseSpec};
+use motor_model::withheld::{benchmark_case_with_gap, generate, CaseRecords, CaseSpec, RecordRole};
 use motor_model::{Effects, Input, ModelError, MotorParams, Record, Trace, EFFECT_NAMES};
 use serde::Serialize;
 
 use crate::diagnose::run::{
     diagnose, fit_nominal, locate_every_jump, with_inputs, DiagnoseSettings, Diagnosis,
 };
-use crate::full_model::Channel;
+use crate::full_model::{Channel, FittedChannel};
 use crate::output_error::{
     equation_error_start, predict_with_step_factor, voltage_input, ExcitedRecord,
 };
@@ -36,8 +37,13 @@ pub struct CaseOutcome {
     pub truth: Vec<&'static str>,
     /// The effects named, in order (empty: `none`); or why the diagnosis failed.
     pub named: Result<Vec<String>, String>,
+    /// Effects the first stage's held-out data could not tell from its verdict.
+    pub ambiguous_with: Vec<String>,
     /// Held-out NRMSE after/before of the first effect named, when it is one present.
     pub heldout_ratio: Option<f64>,
+    /// Held-out gap (NRMSE above the noise floor, SPEC section 7) after/before of the same
+    /// effect, when its gap before is positive.
+    pub heldout_gap_ratio: Option<f64>,
     /// Wall time of the diagnosis \[s\].
     pub seconds: f64,
 }
@@ -105,38 +111,123 @@ pub fn run_case(case: &CaseSpec, settings: &DiagnoseSettings) -> CaseOutcome {
     let t0 = std::time::Instant::now();
     let truth = case.truth();
     let named = diagnose_records(case, settings);
-    let (named, heldout_ratio) = match named {
-        Ok((named, ratio)) => {
+    let (named, ratios, ambiguous_with) = match named {
+        Ok((named, ratios, ambiguous)) => {
             let right = named.first().is_some_and(|n| truth.contains(&n.as_str()));
-            (Ok(named), ratio.filter(|_| right))
+            (Ok(named), ratios.filter(|_| right), ambiguous)
         }
-        Err(e) => (Err(e), None),
+        Err(e) => (Err(e), None, Vec::new()),
     };
     CaseOutcome {
         index: case.index,
         truth,
         named,
-        heldout_ratio,
+        ambiguous_with,
+        heldout_ratio: ratios.map(|r| r.0),
+        heldout_gap_ratio: ratios.and_then(|r| r.1),
         seconds: t0.elapsed().as_secs_f64(),
     }
 }
 
-/// The effects named for `case` and the held-out NRMSE after/before of the first.
-fn diagnose_records(
-    case: &CaseSpec,
-    settings: &DiagnoseSettings,
-) -> Result<(Vec<String>, Option<f64>), String> {
+/// The effects named for `case`, the held-out NRMSE after/before of the first with its
+/// held-out gap after/before ([`heldout_gap_ratio`]), and the effects the first stage could
+/// not tell from its verdict.
+type Named = (Vec<String>, Option<(f64, Option<f64>)>, Vec<String>);
+
+/// See [`Named`].
+fn diagnose_records(case: &CaseSpec, settings: &DiagnoseSettings) -> Result<Named, String> {
     let d = diagnose_case(case, settings)?;
     let named: Vec<String> = d.named().iter().map(|s| s.to_string()).collect();
     let ratio = named.first().and_then(|name| {
-        d.stages
-            .first()?
+        let stage = d.stages.first()?;
+        stage
             .candidates
             .iter()
             .find(|c| c.name == name.as_str())
-            .map(|c| c.heldout_nrmse_after / c.heldout_nrmse_before)
+            .map(|c| {
+                let gap = heldout_gap_ratio(case, &d.held, &stage.fitted_before, &c.fitted);
+                (c.heldout_nrmse_after / c.heldout_nrmse_before, gap)
+            })
     });
-    Ok((named, ratio))
+    let ambiguous = d
+        .stages
+        .first()
+        .map_or_else(Vec::new, |s| s.verdict.ambiguous_with.clone());
+    Ok((named, ratio, ambiguous))
+}
+
+/// Held-out gap after/before of a refit (`after`) against the model it started from
+/// (`before`), both predictions of every record of `case` in the diagnosis's order (the two
+/// steps, then the validation records), over the samples `held` holds out. A channel's gap is
+/// its NRMSE above the NRMSE the noise-free record would show (SPEC section 7: the floor a
+/// perfect model cannot go below; the benchmark knows it exactly, from the case's plant traces
+/// before the logger), summarised over channels as the NRMSE is (weighted by held-out
+/// samples). `None` when the gap before is not positive or a trace is missing.
+pub fn heldout_gap_ratio(
+    case: &CaseSpec,
+    held: &[Vec<bool>],
+    before: &[FittedChannel],
+    after: &[FittedChannel],
+) -> Option<f64> {
+    let traces = case.traces_with(&case.plant_effects()).ok()?;
+    // The records in the diagnosis's order: the high step, the low step, then the others.
+    let role_order = |role: RecordRole| match role {
+        RecordRole::HighStep => 0,
+        RecordRole::LowStep => 1,
+        _ => 2,
+    };
+    let mut order: Vec<usize> = (0..case.records.len()).collect();
+    order.sort_by_key(|&j| role_order(case.records[j].role));
+    let dt = 1.0 / case.measurement.rate_hz;
+    // Each record's noise-free channels, as the fit reads them: the current, and the
+    // tachometer's speed or the central difference of the encoder's angle.
+    let clean = |record: usize, channel: Channel| -> Option<Vec<f64>> {
+        let tr = &traces[*order.get(record)?];
+        Some(match channel {
+            Channel::Current => tr.current.clone(),
+            Channel::Speed => tr.speed.clone(),
+            Channel::EncoderSpeed => {
+                let times: Vec<f64> = (0..tr.position.len()).map(|i| i as f64 * dt).collect();
+                motor_model::central_difference(&times, &tr.position)
+            }
+        })
+    };
+    let (mut gap_before, mut gap_after, mut count) = (0.0, 0.0, 0usize);
+    for b in before {
+        let a = after
+            .iter()
+            .find(|a| a.record == b.record && a.channel == b.channel)?;
+        let c = clean(b.record, b.channel)?;
+        let idx: Vec<usize> = (0..b.samples.len())
+            .filter(|&j| held.get(b.record).is_some_and(|h| h[b.samples[j]]))
+            .collect();
+        if idx.len() < 2 || a.samples != b.samples {
+            continue;
+        }
+        let mean = idx.iter().map(|&j| b.measured[j]).sum::<f64>() / idx.len() as f64;
+        let spread = idx
+            .iter()
+            .map(|&j| (b.measured[j] - mean).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        if spread <= 0.0 {
+            continue;
+        }
+        let norm = |other: &dyn Fn(usize) -> Option<f64>| -> Option<f64> {
+            let mut sse = 0.0_f64;
+            for &j in &idx {
+                sse += (b.measured[j] - other(j)?).powi(2);
+            }
+            Some(sse.sqrt() / spread)
+        };
+        let floor = norm(&|j| c.get(b.samples[j]).copied())?;
+        let nrmse_before = norm(&|j| Some(b.model[j]))?;
+        let nrmse_after = norm(&|j| Some(a.model[j]))?;
+        gap_before += (nrmse_before - floor) * idx.len() as f64;
+        gap_after += (nrmse_after - floor) * idx.len() as f64;
+        count += idx.len();
+    }
+    (count > 0 && gap_before > 0.0).then(|| gap_after / gap_before)
 }
 
 /// The diagnosis of `case`'s records (module docs), or why it could not be made.
@@ -303,6 +394,8 @@ pub struct Summary {
     pub both_named: (usize, usize),
     /// Median held-out NRMSE after/before over correctly named effects (NaN if none).
     pub median_heldout_ratio: f64,
+    /// Median held-out gap after/before over the same effects (NaN if none).
+    pub median_heldout_gap_ratio: f64,
     /// Diagnoses that failed.
     pub failed: usize,
     /// Median wall time of a diagnosis \[s\].
@@ -368,6 +461,12 @@ impl Summary {
             false_alarms: (alarms, nones),
             both_named: (both, pairs),
             median_heldout_ratio: median(outcomes.iter().filter_map(|o| o.heldout_ratio).collect()),
+            median_heldout_gap_ratio: median(
+                outcomes
+                    .iter()
+                    .filter_map(|o| o.heldout_gap_ratio)
+                    .collect(),
+            ),
             failed: outcomes.iter().filter(|o| o.named.is_err()).count(),
             median_seconds: median(outcomes.iter().map(|o| o.seconds).collect()),
         }

@@ -516,6 +516,7 @@ fn unfitted(
         effects: Effects::none(),
         failure: why,
         inputs: Vec::new(),
+        fitted: Vec::new(),
     }
 }
 
@@ -956,6 +957,7 @@ fn run_stage(
             base: found.iter().map(|k| k.name()).collect(),
             candidates,
             verdict,
+            fitted_before: Vec::new(),
         },
         next,
     )

@@ -291,6 +291,10 @@ pub struct CandidateReport {
     /// refitted model puts them within their sample periods (empty when not refitted).
     #[serde(skip)]
     pub inputs: Vec<Option<Input>>,
+    /// The refitted model's prediction of every record and channel, on those instants
+    /// (empty when not refitted; [`Diagnosis::held`] says which samples are held out).
+    #[serde(skip)]
+    pub fitted: Vec<FittedChannel>,
 }
 
 impl CandidateReport {
@@ -324,6 +328,10 @@ pub struct Stage {
     pub candidates: Vec<CandidateReport>,
     /// Their ranking and the verdict.
     pub verdict: Verdict,
+    /// The prediction of every record and channel the stage starts from (the model with the
+    /// effects found before), which each candidate's refit is compared with.
+    #[serde(skip)]
+    pub fitted_before: Vec<FittedChannel>,
 }
 
 /// A diagnosis (module docs).
@@ -337,6 +345,9 @@ pub struct Diagnosis {
     pub nominal_note: Option<String>,
     /// How the held-out data were made, in words.
     pub heldout: String,
+    /// Per record (training records, then validation records), whether each sample is held
+    /// out.
+    pub held: Vec<Vec<bool>>,
     /// Where the nominal model's residual stands above the noise, on every record.
     pub localisation: Localisation,
     /// The stages of the search (the first looks for one effect; a second, on top of the
@@ -1971,6 +1982,7 @@ pub fn diagnose(
         nominal,
         nominal_note,
         heldout,
+        held,
         localisation,
         stages,
     })
@@ -2391,6 +2403,7 @@ fn run_stage(
             effects,
             failure: why,
             inputs: Vec::new(),
+            fitted: Vec::new(),
         };
     // Without the evidence of a refit, the screening score speaks: no evidence below the
     // level, evidence the refit could not resolve above it.
@@ -2589,6 +2602,7 @@ fn run_stage(
                         motor_shift,
                         motor: Some(fit.params),
                         inputs,
+                        fitted: pred.clone(),
                         ..unfitted(k, fit.effects, assessment, None)
                     },
                     sse,
@@ -2699,6 +2713,7 @@ fn run_stage(
         base: base.effects.list().iter().map(Effect::name).collect(),
         candidates,
         verdict,
+        fitted_before: base.fitted.clone(),
     }
 }
 
