@@ -18,9 +18,14 @@
 //!   one-sided paired t-test over the blocks is reported.
 //!
 //! Candidates are ranked by their held-out improvement `Σ d_b` less a penalty of 2 per extra
-//! parameter (Akaike's, in the same noise-variance units). The top significant candidate is the
-//! verdict; the next significant one is *ambiguous* with it when the paired test of their
-//! held-out block errors does not prefer the top one at α.
+//! parameter (Akaike's, in the same noise-variance units). A significant candidate is
+//! *ambiguous* with the top significant one when the paired test of their held-out block
+//! errors does not prefer the top one at α. Of the top one and those ambiguous with it, the
+//! verdict is the one the training data support most: the largest likelihood-ratio statistic
+//! less 2 per extra parameter and `2 ln s` for a shape picked among `s` (a cogging torque's
+//! period count), the higher held-out score among equals; the others are named as ambiguous
+//! with it. The held-out data cannot tell them apart, and a flexible candidate (a cogging
+//! torque at the period count that fits best) takes part of the gap any effect leaves there.
 
 use serde::Serialize;
 
@@ -123,6 +128,17 @@ fn paired_p(a: &[f64], b: &[f64]) -> f64 {
     }
 }
 
+/// The training data's support for `c`: its likelihood-ratio statistic less `penalty` per
+/// extra parameter and `2 ln s` for a shape picked among `s` ([`CandidateScore::searched`]),
+/// Akaike's criterion as the screening orders candidates; −∞ without a statistic.
+fn training_support(c: &CandidateScore<'_>, penalty: f64) -> f64 {
+    c.train_statistic
+        .filter(|x| x.is_finite())
+        .map_or(f64::NEG_INFINITY, |x| {
+            x - penalty * c.extra_params as f64 - 2.0 * (c.searched.max(1) as f64).ln()
+        })
+}
+
 /// Ranks `candidates` and names the verdict (module docs).
 pub fn rank_candidates(candidates: &[CandidateScore<'_>], settings: &VerdictSettings) -> Verdict {
     let m = candidates.iter().filter(|c| c.testable).count().max(1);
@@ -168,21 +184,37 @@ pub fn rank_candidates(candidates: &[CandidateScore<'_>], settings: &VerdictSett
         .collect();
     ranked.sort_by(|a, b| b.0.score.total_cmp(&a.0.score));
     let significant: Vec<&(Ranked, usize)> = ranked.iter().filter(|r| r.0.significant).collect();
-    let verdict = significant.first().map(|r| r.0.name.clone());
-    let ambiguous_with = match significant.first() {
-        Some((_, top)) => significant[1..]
-            .iter()
-            .filter(|(_, k)| {
-                // Does the top candidate beat this one on the held-out blocks?
-                paired_p(
-                    candidates[*k].heldout_sse_after,
-                    candidates[*top].heldout_sse_after,
-                ) >= settings.alpha
-            })
-            .map(|r| r.0.name.clone())
-            .collect(),
+    // The top candidate and those it does not beat on the held-out blocks: the data cannot
+    // tell them apart.
+    let alike: Vec<&(Ranked, usize)> = match significant.first() {
+        Some(first) => {
+            let top = first.1;
+            std::iter::once(*first)
+                .chain(significant[1..].iter().copied().filter(|(_, k)| {
+                    paired_p(
+                        candidates[*k].heldout_sse_after,
+                        candidates[top].heldout_sse_after,
+                    ) >= settings.alpha
+                }))
+                .collect()
+        }
         None => Vec::new(),
     };
+    // Of those, the verdict is the one the training data support most, by its penalised
+    // likelihood ratio; the best held-out score among equals.
+    let mut strongest: Option<(&(Ranked, usize), f64)> = None;
+    for r in &alike {
+        let support = training_support(&candidates[r.1], settings.penalty_per_param);
+        if strongest.is_none_or(|(_, best)| support > best) {
+            strongest = Some((r, support));
+        }
+    }
+    let verdict = strongest.map(|(r, _)| r.0.name.clone());
+    let ambiguous_with = alike
+        .iter()
+        .map(|r| r.0.name.clone())
+        .filter(|name| Some(name) != verdict.as_ref())
+        .collect();
     Verdict {
         ranked: ranked.into_iter().map(|(r, _)| r).collect(),
         verdict,
@@ -253,6 +285,53 @@ mod tests {
         let v = rank_candidates(&cands, &VerdictSettings::default());
         assert!(v.verdict.is_some());
         assert_eq!(v.ambiguous_with.len(), 1, "{v:?}");
+    }
+
+    #[test]
+    fn of_two_candidates_the_held_out_data_cannot_tell_apart_the_training_data_pick_one() {
+        let mut rng = NoiseRng::new(5);
+        let before = blocks(&mut rng, 0.5, 20);
+        // A flexible candidate (two parameters and a shape searched among 40) scores better on
+        // held-out data than a one-parameter one (by 10 noise variances, 8 after the
+        // penalties), by less than the paired test can tell from the blocks' spread (±3 a
+        // block); on the training data it explains less.
+        let flexible = blocks(&mut rng, 0.0, 20);
+        let simple: Vec<f64> = flexible
+            .iter()
+            .enumerate()
+            .map(|(b, x)| x + 0.5 + if b % 2 == 0 { 3.0 } else { -3.0 })
+            .collect();
+        let flexible_candidate = CandidateScore {
+            extra_params: 2,
+            searched: 40,
+            ..candidate("flexible", 300.0, &before, &flexible)
+        };
+        let cands = [
+            flexible_candidate,
+            candidate("simple", 1000.0, &before, &simple),
+        ];
+        let v = rank_candidates(&cands, &VerdictSettings::default());
+        assert_eq!(v.ranked[0].name, "flexible", "{v:?}");
+        assert_eq!(v.verdict.as_deref(), Some("simple"), "{v:?}");
+        assert_eq!(v.ambiguous_with, ["flexible"], "{v:?}");
+        // With the training data behind the flexible one (its 300 less 4 and 2 ln 40 against
+        // the simple one's 100 less 2), it is named.
+        let cands = [
+            flexible_candidate,
+            candidate("simple", 100.0, &before, &simple),
+        ];
+        let v = rank_candidates(&cands, &VerdictSettings::default());
+        assert_eq!(v.verdict.as_deref(), Some("flexible"), "{v:?}");
+        assert_eq!(v.ambiguous_with, ["simple"], "{v:?}");
+        // Clearly better on held-out data, the flexible one is named alone.
+        let worse = blocks(&mut rng, 0.3, 20);
+        let cands = [
+            flexible_candidate,
+            candidate("simple", 1000.0, &before, &worse),
+        ];
+        let v = rank_candidates(&cands, &VerdictSettings::default());
+        assert_eq!(v.verdict.as_deref(), Some("flexible"), "{v:?}");
+        assert!(v.ambiguous_with.is_empty(), "{v:?}");
     }
 
     #[test]
