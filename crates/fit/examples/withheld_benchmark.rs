@@ -7,8 +7,10 @@
 //! cargo run --release -p fit --example withheld_benchmark -- [SEED] [N] [CASE]
 //! ```
 //!
-//! With CASE, only that case is diagnosed and every candidate of every stage printed. With
-//! `WITHHELD_CASES=3,15,66`, only the cases listed are diagnosed and scored.
+//! With CASE, only that case is diagnosed and every candidate of every stage printed (with
+//! `WITHHELD_DIFF=NAME`, also the held-out samples where candidate NAME's refit loses and
+//! gains most against its stage's base model). With `WITHHELD_CASES=3,15,66`, only the cases
+//! listed are diagnosed and scored.
 //!
 //! The cases are `fit::diagnose::benchmark::calibrated_case`'s: each effect sized on the gap
 //! the nominal model cannot absorb (`nominal_gap`). With `WITHHELD_PLAIN=1` they are
@@ -163,6 +165,46 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
         }
         records::print_stages(&d);
+        if let Ok(name) = std::env::var("WITHHELD_DIFF") {
+            // The held-out samples where candidate `name`'s refit loses and gains most against
+            // its stage's base model, each squared residual over the base channel's mean.
+            for (si, stage) in d.stages.iter().enumerate() {
+                let Some(c) = stage.candidates.iter().find(|c| c.name == name) else {
+                    continue;
+                };
+                let mut rows = Vec::new();
+                for b in &stage.fitted_before {
+                    let Some(a) = c
+                        .fitted
+                        .iter()
+                        .find(|a| a.record == b.record && a.channel == b.channel)
+                    else {
+                        continue;
+                    };
+                    let var = b.residual_rms().powi(2);
+                    for (j, &i) in b.samples.iter().enumerate().take(a.samples.len()) {
+                        if !d.held.get(b.record).is_some_and(|h| h[i]) {
+                            continue;
+                        }
+                        let before = (b.measured[j] - b.model[j]).powi(2) / var;
+                        let after = (a.measured[j] - a.model[j]).powi(2) / var;
+                        rows.push((after - before, b.record, b.channel, i, j, b, a));
+                    }
+                }
+                let total: f64 = rows.iter().map(|r| r.0).sum();
+                rows.sort_by(|x, y| y.0.total_cmp(&x.0));
+                println!("stage {si} {name}: held-out loss {total:.1} (base mean squares)");
+                let show = |r: &(f64, usize, fit::Channel, usize, usize, _, _)| {
+                    let (b, a): (&fit::FittedChannel, &fit::FittedChannel) = (r.5, r.6);
+                    println!(
+                        "  {:>9.2} record {} {:?} sample {} measured {:.5e} before {:.5e} after {:.5e}",
+                        r.0, r.1, r.2, r.3, b.measured[r.4], b.model[r.4], a.model[r.4]
+                    );
+                };
+                rows.iter().take(12).for_each(show);
+                rows.iter().rev().take(5).for_each(show);
+            }
+        }
         if std::env::var_os("WITHHELD_VERBOSE").is_some() {
             for stage in &d.stages {
                 for r in &stage.verdict.ranked {
@@ -223,7 +265,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             )
         });
         println!(
-            "{:>4}  truth {:<45} named {:<45} ratio {:>6} gap {:>6}  {:.1} s{}{after_text}",
+            "{:>4}  truth {:<45} named {:<45} ratio {:>6} (floor {:>6}) gap {:>6}  {:.1} s{}{after_text}",
             i,
             o.truth.join("+"),
             match &o.named {
@@ -232,6 +274,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 Err(_) => "failed".to_string(),
             },
             o.heldout_ratio.map_or("-".into(), |r| format!("{r:.3}")),
+            o.heldout_floor_ratio
+                .map_or("-".into(), |r| format!("{r:.3}")),
             o.heldout_gap_ratio
                 .map_or("-".into(), |r| format!("{r:.3}")),
             o.seconds,
@@ -281,7 +325,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         println!();
     }
     println!(
-        "\nseed {seed}, {} cases: top-1 accuracy {:.1} %, false alarms on none {}/{}, both named {}/{}, median held-out NRMSE after/before {:.3}, median held-out gap after/before {:.3}, failed {}, median {:.1} s a case",
+        "\nseed {seed}, {} cases: top-1 accuracy {:.1} %, false alarms on none {}/{}, both named {}/{}, median held-out NRMSE after/before {:.3} (a perfect model's {:.3}), median held-out gap after/before {:.3}, failed {}, median {:.1} s a case",
         s.cases,
         100.0 * s.top1_accuracy,
         s.false_alarms.0,
@@ -289,6 +333,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         s.both_named.0,
         s.both_named.1,
         s.median_heldout_ratio,
+        s.median_heldout_floor_ratio,
         s.median_heldout_gap_ratio,
         s.failed,
         s.median_seconds

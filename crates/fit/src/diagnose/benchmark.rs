@@ -44,6 +44,9 @@ pub struct CaseOutcome {
     /// Held-out gap (NRMSE above the noise floor, SPEC section 7) after/before of the same
     /// effect, when its gap before is positive.
     pub heldout_gap_ratio: Option<f64>,
+    /// Held-out NRMSE of the noise-free records over the NRMSE before, on the same samples and
+    /// channels: the lowest NRMSE after/before any model could reach ([`HeldoutShrink`]).
+    pub heldout_floor_ratio: Option<f64>,
     /// Wall time of the diagnosis \[s\].
     pub seconds: f64,
 }
@@ -111,10 +114,10 @@ pub fn run_case(case: &CaseSpec, settings: &DiagnoseSettings) -> CaseOutcome {
     let t0 = std::time::Instant::now();
     let truth = case.truth();
     let named = diagnose_records(case, settings);
-    let (named, ratios, ambiguous_with) = match named {
-        Ok((named, ratios, ambiguous)) => {
-            let right = named.first().is_some_and(|n| truth.contains(&n.as_str()));
-            (Ok(named), ratios.filter(|_| right), ambiguous)
+    let (named, shrink, ambiguous_with) = match named {
+        Ok(n) => {
+            let right = n.named.first().is_some_and(|x| truth.contains(&x.as_str()));
+            (Ok(n.named), n.shrink.filter(|_| right), n.ambiguous_with)
         }
         Err(e) => (Err(e), None, Vec::new()),
     };
@@ -123,37 +126,66 @@ pub fn run_case(case: &CaseSpec, settings: &DiagnoseSettings) -> CaseOutcome {
         truth,
         named,
         ambiguous_with,
-        heldout_ratio: ratios.map(|r| r.0),
-        heldout_gap_ratio: ratios.and_then(|r| r.1),
+        heldout_ratio: shrink.map(|s| s.nrmse_ratio),
+        heldout_gap_ratio: shrink.and_then(|s| s.gap.and_then(|g| g.gap_ratio)),
+        heldout_floor_ratio: shrink.and_then(|s| s.gap.map(|g| g.floor_ratio)),
         seconds: t0.elapsed().as_secs_f64(),
     }
 }
 
-/// The effects named for `case`, the held-out NRMSE after/before of the first with its
-/// held-out gap after/before ([`heldout_gap_ratio`]), and the effects the first stage could
-/// not tell from its verdict.
-type Named = (Vec<String>, Option<(f64, Option<f64>)>, Vec<String>);
+/// What [`diagnose_records`] reads off a diagnosis.
+struct Named {
+    /// The effects named, in order (empty: `none`).
+    named: Vec<String>,
+    /// How far the first effect named shrinks the held-out data's misfit.
+    shrink: Option<Shrink>,
+    /// The effects the first stage could not tell from its verdict.
+    ambiguous_with: Vec<String>,
+}
 
-/// See [`Named`].
+/// The first effect named: its held-out NRMSE after/before, and its held-out gap against the
+/// noise-free records ([`heldout_gap_ratio`]).
+#[derive(Clone, Copy)]
+struct Shrink {
+    nrmse_ratio: f64,
+    gap: Option<HeldoutShrink>,
+}
+
+/// The effects named for `case` (see [`Named`]).
 fn diagnose_records(case: &CaseSpec, settings: &DiagnoseSettings) -> Result<Named, String> {
     let d = diagnose_case(case, settings)?;
     let named: Vec<String> = d.named().iter().map(|s| s.to_string()).collect();
-    let ratio = named.first().and_then(|name| {
+    let shrink = named.first().and_then(|name| {
         let stage = d.stages.first()?;
         stage
             .candidates
             .iter()
             .find(|c| c.name == name.as_str())
-            .map(|c| {
-                let gap = heldout_gap_ratio(case, &d.held, &stage.fitted_before, &c.fitted);
-                (c.heldout_nrmse_after / c.heldout_nrmse_before, gap)
+            .map(|c| Shrink {
+                nrmse_ratio: c.heldout_nrmse_after / c.heldout_nrmse_before,
+                gap: heldout_gap_ratio(case, &d.held, &stage.fitted_before, &c.fitted),
             })
     });
-    let ambiguous = d
+    let ambiguous_with = d
         .stages
         .first()
         .map_or_else(Vec::new, |s| s.verdict.ambiguous_with.clone());
-    Ok((named, ratio, ambiguous))
+    Ok(Named {
+        named,
+        shrink,
+        ambiguous_with,
+    })
+}
+
+/// A refit's held-out misfit measured against the noise-free records ([`heldout_gap_ratio`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeldoutShrink {
+    /// Gap (NRMSE above the noise-free records' NRMSE) after/before; `None` when the gap
+    /// before is not positive.
+    pub gap_ratio: Option<f64>,
+    /// NRMSE of the noise-free records over the NRMSE before, summarised alike: the NRMSE
+    /// after/before a perfect model would reach, the lowest there is.
+    pub floor_ratio: f64,
 }
 
 /// Held-out gap after/before of a refit (`after`) against the model it started from
@@ -162,13 +194,13 @@ fn diagnose_records(case: &CaseSpec, settings: &DiagnoseSettings) -> Result<Name
 /// its NRMSE above the NRMSE the noise-free record would show (SPEC section 7: the floor a
 /// perfect model cannot go below; the benchmark knows it exactly, from the case's plant traces
 /// before the logger), summarised over channels as the NRMSE is (weighted by held-out
-/// samples). `None` when the gap before is not positive or a trace is missing.
+/// samples). `None` when a trace is missing or no channel has held-out samples to compare.
 pub fn heldout_gap_ratio(
     case: &CaseSpec,
     held: &[Vec<bool>],
     before: &[FittedChannel],
     after: &[FittedChannel],
-) -> Option<f64> {
+) -> Option<HeldoutShrink> {
     let traces = case.traces_with(&case.plant_effects()).ok()?;
     // The records in the diagnosis's order: the high step, the low step, then the others.
     let role_order = |role: RecordRole| match role {
@@ -192,7 +224,8 @@ pub fn heldout_gap_ratio(
             }
         })
     };
-    let (mut gap_before, mut gap_after, mut count) = (0.0, 0.0, 0usize);
+    let (mut gap_before, mut gap_after, mut floor_sum, mut before_sum, mut count) =
+        (0.0, 0.0, 0.0, 0.0, 0usize);
     for b in before {
         let a = after
             .iter()
@@ -225,9 +258,14 @@ pub fn heldout_gap_ratio(
         let nrmse_after = norm(&|j| Some(a.model[j]))?;
         gap_before += (nrmse_before - floor) * idx.len() as f64;
         gap_after += (nrmse_after - floor) * idx.len() as f64;
+        floor_sum += floor * idx.len() as f64;
+        before_sum += nrmse_before * idx.len() as f64;
         count += idx.len();
     }
-    (count > 0 && gap_before > 0.0).then(|| gap_after / gap_before)
+    (count > 0 && before_sum > 0.0).then(|| HeldoutShrink {
+        gap_ratio: (gap_before > 0.0).then(|| gap_after / gap_before),
+        floor_ratio: floor_sum / before_sum,
+    })
 }
 
 /// The diagnosis of `case`'s records (module docs), or why it could not be made.
@@ -396,6 +434,9 @@ pub struct Summary {
     pub median_heldout_ratio: f64,
     /// Median held-out gap after/before over the same effects (NaN if none).
     pub median_heldout_gap_ratio: f64,
+    /// Median over the same effects of the lowest held-out NRMSE after/before a perfect
+    /// model would reach ([`HeldoutShrink::floor_ratio`]; NaN if none).
+    pub median_heldout_floor_ratio: f64,
     /// Diagnoses that failed.
     pub failed: usize,
     /// Median wall time of a diagnosis \[s\].
@@ -465,6 +506,12 @@ impl Summary {
                 outcomes
                     .iter()
                     .filter_map(|o| o.heldout_gap_ratio)
+                    .collect(),
+            ),
+            median_heldout_floor_ratio: median(
+                outcomes
+                    .iter()
+                    .filter_map(|o| o.heldout_floor_ratio)
                     .collect(),
             ),
             failed: outcomes.iter().filter(|o| o.named.is_err()).count(),
