@@ -131,7 +131,7 @@ fn paired_p(a: &[f64], b: &[f64]) -> f64 {
 /// The training data's support for `c`: its likelihood-ratio statistic less `penalty` per
 /// extra parameter and `2 ln s` for a shape picked among `s` ([`CandidateScore::searched`]),
 /// Akaike's criterion as the screening orders candidates; −∞ without a statistic.
-fn training_support(c: &CandidateScore<'_>, penalty: f64) -> f64 {
+pub(crate) fn training_support(c: &CandidateScore<'_>, penalty: f64) -> f64 {
     c.train_statistic
         .filter(|x| x.is_finite())
         .map_or(f64::NEG_INFINITY, |x| {
