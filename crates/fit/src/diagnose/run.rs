@@ -1491,6 +1491,24 @@ const SATURATION_ABSORBED: (f64, f64) = (0.3, 0.5);
 /// friction Ts ([`absorbed_start`]).
 const STRIBECK_SPLIT: f64 = 0.5;
 
+/// A refitted Stribeck speed is taken as one the records visit between these multiples of the
+/// slowest and the fastest record's peak speed ([`stribeck_within_records`]).
+const STRIBECK_VISITED: (f64, f64) = (1e-3, 1e3);
+
+/// Whether `fit`'s Stribeck friction falls at a speed `records` visit
+/// ([`STRIBECK_VISITED`]): not a step of friction at rest (Ωs → 0) nor a constant level
+/// (Ωs → ∞), the two ends a refit from the base model's single level runs to.
+fn stribeck_within_records(fit: &FullFit, records: &[ExcitedRecord<'_>]) -> bool {
+    let Some(Effect::StribeckFriction(s)) = fit.effects.get(EffectKind::StribeckFriction) else {
+        return false;
+    };
+    let peaks: Vec<f64> = records.iter().filter_map(peak_speed).collect();
+    let slowest = peaks.iter().copied().fold(f64::INFINITY, f64::min);
+    let fastest = peaks.iter().copied().fold(0.0_f64, f64::max);
+    s.stribeck_speed_rad_s >= STRIBECK_VISITED.0 * slowest
+        && s.stribeck_speed_rad_s <= STRIBECK_VISITED.1 * fastest
+}
+
 /// A start for `kind` beside the model that absorbed it, where the effect trades against a
 /// motor parameter the base fit has already moved to mimic it (from the base model, growing
 /// the effect alone only adds to what that parameter does):
@@ -2551,7 +2569,16 @@ fn run_stage(
         // heating winding into a mean R) is a saddle there: the effect grown alone only adds
         // to what the parameter does. It is also refitted from a start that splits the two,
         // on the jumps located beside that start, and the lower cost kept.
-        let outcome = match absorbed_start(kind, plain, &base.motor, base.train) {
+        // A Stribeck friction refitted to a speed the records visit has split its levels
+        // already: the split start is for one whose Ωs ran off to 0 or infinity.
+        let split_needed = match (&outcome, kind) {
+            (Ok(fit), EffectKind::StribeckFriction) => !stribeck_within_records(fit, base.train),
+            _ => true,
+        };
+        let absorbed = split_needed
+            .then(|| absorbed_start(kind, plain, &base.motor, base.train))
+            .flatten();
+        let outcome = match absorbed {
             Some((motor, start)) => {
                 // The training records' alone: the split start's refit is made on them.
                 let inputs = located_inputs(
