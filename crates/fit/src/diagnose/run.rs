@@ -1323,10 +1323,7 @@ fn candidate_starts(
         }
     }
     if let Effect::StribeckFriction(s) = first {
-        let w_slowest = records
-            .iter()
-            .filter_map(peak_speed)
-            .fold(f64::INFINITY, f64::min);
+        let (w_slowest, _) = records_peak_speeds(records);
         if w_slowest.is_finite() && w_slowest > 0.0 {
             starts.extend(STRIBECK_START_FRACTIONS.iter().map(|&x| {
                 Effect::StribeckFriction(StribeckFriction {
@@ -1387,6 +1384,17 @@ fn peak_speed(r: &ExcitedRecord<'_>) -> Option<f64> {
                     .map(|w| ((w[1] - w[0]) / r.dt).abs())
                     .fold(0.0_f64, f64::max)
             })
+        })
+}
+
+/// The slowest and the fastest of the records' peak |Ω| \[rad/s\] ([`peak_speed`]); `(∞, 0)`
+/// when no record has a speed or an angle.
+fn records_peak_speeds(records: &[ExcitedRecord<'_>]) -> (f64, f64) {
+    records
+        .iter()
+        .filter_map(peak_speed)
+        .fold((f64::INFINITY, 0.0_f64), |(lo, hi), w| {
+            (lo.min(w), hi.max(w))
         })
 }
 
@@ -1502,9 +1510,7 @@ fn stribeck_within_records(fit: &FullFit, records: &[ExcitedRecord<'_>]) -> bool
     let Some(Effect::StribeckFriction(s)) = fit.effects.get(EffectKind::StribeckFriction) else {
         return false;
     };
-    let peaks: Vec<f64> = records.iter().filter_map(peak_speed).collect();
-    let slowest = peaks.iter().copied().fold(f64::INFINITY, f64::min);
-    let fastest = peaks.iter().copied().fold(0.0_f64, f64::max);
+    let (slowest, fastest) = records_peak_speeds(records);
     s.stribeck_speed_rad_s >= STRIBECK_VISITED.0 * slowest
         && s.stribeck_speed_rad_s <= STRIBECK_VISITED.1 * fastest
 }
@@ -2140,6 +2146,24 @@ pub fn localise_fit(
 /// statistic (empty and `None` when it was not refitted, or its refit failed).
 type Refit = (CandidateReport, Vec<f64>, Option<f64>);
 
+/// A candidate's [`Refit`] as [`rank_candidates`] scores it, against the held-out blocks'
+/// squared errors before (`sse_before`); `searched` as [`CandidateScore::searched`].
+fn refit_score<'a>(
+    (report, sse, statistic): &'a Refit,
+    searched: usize,
+    sse_before: &'a [f64],
+) -> CandidateScore<'a> {
+    CandidateScore {
+        name: report.name,
+        extra_params: report.params.len(),
+        testable: report.testable,
+        train_statistic: *statistic,
+        searched,
+        heldout_sse_before: sse_before,
+        heldout_sse_after: sse,
+    }
+}
+
 /// The screening of `kinds` on top of `base` (see [`crate::diagnose::screen`]), in their
 /// order, each with the start its refit begins from (of [`candidate_starts`], the testable one
 /// of largest statistic): `None` for a candidate whose signature could not be simulated, and
@@ -2750,15 +2774,7 @@ fn run_stage(
         // refitted without a statistic or held-out blocks, which names none of them.
         let scores: Vec<CandidateScore<'_>> = (0..kinds.len())
             .map(|k| match refitted.iter().find(|(j, _)| *j == k) {
-                Some((_, (c, sse, statistic))) => CandidateScore {
-                    name: c.name,
-                    extra_params: c.params.len(),
-                    testable: c.testable,
-                    train_statistic: *statistic,
-                    searched: searched[k],
-                    heldout_sse_before: &sse_before,
-                    heldout_sse_after: sse,
-                },
+                Some((_, r)) => refit_score(r, searched[k], &sse_before),
                 None => CandidateScore {
                     name: kinds[k].name(),
                     extra_params: 0,
@@ -2811,15 +2827,7 @@ fn run_stage(
     let scores: Vec<CandidateScore<'_>> = results
         .iter()
         .zip(&searched)
-        .map(|((c, sse, statistic), &searched)| CandidateScore {
-            name: c.name,
-            extra_params: c.params.len(),
-            testable: c.testable,
-            train_statistic: *statistic,
-            searched,
-            heldout_sse_before: &sse_before,
-            heldout_sse_after: sse,
-        })
+        .map(|(r, &searched)| refit_score(r, searched, &sse_before))
         .collect();
     let verdict = rank_candidates(&scores, &settings.verdict);
     let mut candidates: Vec<CandidateReport> = results.into_iter().map(|(c, _, _)| c).collect();
