@@ -20,6 +20,7 @@
 use motor_model::withheld::{benchmark_case_with_gap, generate, CaseRecords, CaseSpec, RecordRole};
 use motor_model::{Effects, Input, ModelError, MotorParams, Record, Trace, EFFECT_NAMES};
 use serde::Serialize;
+use std::borrow::Cow;
 
 use crate::diagnose::run::{
     diagnose, fit_nominal, locate_every_jump, with_inputs, DiagnoseSettings, Diagnosis,
@@ -48,6 +49,10 @@ pub struct CaseOutcome {
     /// Held-out NRMSE of the noise-free records over the NRMSE before, on the same samples and
     /// channels: the lowest NRMSE after/before any model could reach ([`HeldoutShrink`]).
     pub heldout_floor_ratio: Option<f64>,
+    /// Held-out NRMSE after/before of the same effect on the one held-out channel of one
+    /// record whose NRMSE before stands furthest above its noise-free NRMSE (where the gap is:
+    /// [`HeldoutShrink::gap_channel`]), and the ratio a perfect model reaches there.
+    pub heldout_gap_channel: Option<GapChannel>,
     /// Wall time of the diagnosis \[s\].
     pub seconds: f64,
 }
@@ -130,6 +135,7 @@ pub fn run_case(case: &CaseSpec, settings: &DiagnoseSettings) -> CaseOutcome {
         heldout_ratio: shrink.map(|s| s.nrmse_ratio),
         heldout_gap_ratio: shrink.and_then(|s| s.gap.and_then(|g| g.gap_ratio)),
         heldout_floor_ratio: shrink.and_then(|s| s.gap.map(|g| g.floor_ratio)),
+        heldout_gap_channel: shrink.and_then(|s| s.gap.and_then(|g| g.gap_channel)),
         seconds: t0.elapsed().as_secs_f64(),
     }
 }
@@ -187,6 +193,20 @@ pub struct HeldoutShrink {
     /// NRMSE of the noise-free records over the NRMSE before, summarised alike: the NRMSE
     /// after/before a perfect model would reach, the lowest there is.
     pub floor_ratio: f64,
+    /// The channel of one record with the largest gap before (its NRMSE before minus its
+    /// noise-free NRMSE, both over its held-out samples): where the effect shows. Chosen on
+    /// the model before and the noise-free record, never on the refit. `None` when no channel
+    /// has a positive gap.
+    pub gap_channel: Option<GapChannel>,
+}
+
+/// One held-out channel of one record, where a refit is judged ([`HeldoutShrink::gap_channel`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct GapChannel {
+    /// Its NRMSE after/before.
+    pub nrmse_ratio: f64,
+    /// Its noise-free NRMSE over its NRMSE before: the lowest NRMSE after/before there.
+    pub floor_ratio: f64,
 }
 
 /// Held-out gap after/before of a refit (`after`) against the model it started from
@@ -214,19 +234,21 @@ pub fn heldout_gap_ratio(
     let dt = 1.0 / case.measurement.rate_hz;
     // Each record's noise-free channels, as the fit reads them: the current, and the
     // tachometer's speed or the central difference of the encoder's angle.
-    let clean = |record: usize, channel: Channel| -> Option<Vec<f64>> {
+    let clean = |record: usize, channel: Channel| -> Option<Cow<'_, [f64]>> {
         let tr = &traces[*order.get(record)?];
         Some(match channel {
-            Channel::Current => tr.current.clone(),
-            Channel::Speed => tr.speed.clone(),
+            Channel::Current => Cow::Borrowed(&tr.current),
+            Channel::Speed => Cow::Borrowed(&tr.speed),
             Channel::EncoderSpeed => {
                 let times: Vec<f64> = (0..tr.position.len()).map(|i| i as f64 * dt).collect();
-                motor_model::central_difference(&times, &tr.position)
+                Cow::Owned(motor_model::central_difference(&times, &tr.position))
             }
         })
     };
     let (mut gap_before, mut gap_after, mut floor_sum, mut before_sum, mut count) =
         (0.0, 0.0, 0.0, 0.0, 0usize);
+    // The channel with the largest gap before, with that gap.
+    let mut widest: Option<(f64, GapChannel)> = None;
     for b in before {
         let a = after
             .iter()
@@ -257,6 +279,15 @@ pub fn heldout_gap_ratio(
         let floor = norm(&|j| c.get(b.samples[j]).copied())?;
         let nrmse_before = norm(&|j| Some(b.model[j]))?;
         let nrmse_after = norm(&|j| Some(a.model[j]))?;
+        if nrmse_before - floor > widest.map_or(0.0, |(g, _)| g) {
+            widest = Some((
+                nrmse_before - floor,
+                GapChannel {
+                    nrmse_ratio: nrmse_after / nrmse_before,
+                    floor_ratio: floor / nrmse_before,
+                },
+            ));
+        }
         gap_before += (nrmse_before - floor) * idx.len() as f64;
         gap_after += (nrmse_after - floor) * idx.len() as f64;
         floor_sum += floor * idx.len() as f64;
@@ -266,6 +297,7 @@ pub fn heldout_gap_ratio(
     (count > 0 && before_sum > 0.0).then(|| HeldoutShrink {
         gap_ratio: (gap_before > 0.0).then(|| gap_after / gap_before),
         floor_ratio: floor_sum / before_sum,
+        gap_channel: widest.map(|(_, c)| c),
     })
 }
 
@@ -438,6 +470,11 @@ pub struct Summary {
     /// Median over the same effects of the lowest held-out NRMSE after/before a perfect
     /// model would reach ([`HeldoutShrink::floor_ratio`]; NaN if none).
     pub median_heldout_floor_ratio: f64,
+    /// Median over the same effects of the held-out NRMSE after/before on the channel where
+    /// the gap is ([`CaseOutcome::heldout_gap_channel`]; NaN if none).
+    pub median_gap_channel_ratio: f64,
+    /// Median over the same effects of the lowest NRMSE after/before on that channel.
+    pub median_gap_channel_floor_ratio: f64,
     /// Diagnoses that failed.
     pub failed: usize,
     /// Median wall time of a diagnosis \[s\].
@@ -513,6 +550,18 @@ impl Summary {
                 outcomes
                     .iter()
                     .filter_map(|o| o.heldout_floor_ratio)
+                    .collect(),
+            ),
+            median_gap_channel_ratio: median(
+                outcomes
+                    .iter()
+                    .filter_map(|o| o.heldout_gap_channel.map(|c| c.nrmse_ratio))
+                    .collect(),
+            ),
+            median_gap_channel_floor_ratio: median(
+                outcomes
+                    .iter()
+                    .filter_map(|o| o.heldout_gap_channel.map(|c| c.floor_ratio))
                     .collect(),
             ),
             failed: outcomes.iter().filter(|o| o.named.is_err()).count(),
