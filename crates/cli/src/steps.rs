@@ -58,9 +58,6 @@ pub struct LoadedStep {
     /// The whole record, its voltage rebuilt as levels, for a step that comes back down (a
     /// return to 0 V): the full method fits the rise and the fall.
     pub whole: Option<LoadedExcited>,
-    /// How the whole record starts, from its first samples (`None` where they cannot tell:
-    /// taken as rest, as the step methods assume).
-    pub initial: Option<DetectedInitialState>,
     /// The channels the record measured (the current's ADC steps over the whole record).
     pub channels: MeasuredChannels,
 }
@@ -200,26 +197,73 @@ pub fn step_from(path: &Path, loaded: Loaded, quiet: bool) -> Result<LoadedStep>
     load_step_given(judge_step(path, loaded), quiet)
 }
 
-/// [`load_step`] of a high- and a low-voltage record, the two read at once (each on a core of
-/// its own where there are two): the warnings and errors are those of `high` then `low`, in
-/// the order [`load_step`] one after the other gives them.
+/// A high- and a low-voltage record read by [`load_step_pair`].
+pub enum StepPair {
+    /// Both records start at rest (or are taken to): their steps, high then low as given.
+    Steps(Box<(LoadedStep, LoadedStep)>),
+    /// A record whose first samples show a running motor, which the step methods cannot
+    /// take: both records as read (high then low), and why (`file:lines: reason` of each
+    /// such record).
+    Moving {
+        /// The two records as read.
+        records: Box<[Loaded; 2]>,
+        /// Which records do not start at rest, and why.
+        why: String,
+    },
+}
+
+/// [`load_step`] of a high- and a low-voltage record, each file read once (the two at once,
+/// each on a core of its own where there are two): the warnings and errors are those of `high`
+/// then `low`, in the order [`load_step`] one after the other gives them. Unless `assume_rest`,
+/// a pair with a record that does not start at rest is returned as read
+/// ([`StepPair::Moving`]), so that a pipe serves as a file does.
 pub fn load_step_pair(
     high: &Path,
     low: &Path,
     map: &ColumnMap,
     quiet: bool,
-) -> Result<(LoadedStep, LoadedStep)> {
-    let (high, low) = std::thread::scope(|scope| {
-        let low = scope.spawn(|| read_step(low, map));
-        let high = read_step(high, map);
+    assume_rest: bool,
+) -> Result<StepPair> {
+    let (high_read, low_read) = std::thread::scope(|scope| {
+        let low = scope.spawn(|| read_loaded(low, map, true));
+        let high = read_loaded(high, map, true);
         (high, low.join())
     });
-    let low = low.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
-    let high = load_step_given(high, quiet)?;
-    Ok((high, load_step_given(low, quiet)?))
+    let low_read = low_read.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+    let (high_read, low_read) = (high_read?, low_read?);
+    if !assume_rest {
+        let moving: Vec<String> = [(high, &high_read), (low, &low_read)]
+            .iter()
+            .filter_map(|(path, l)| {
+                let d = initial_state_of(&l.record)?;
+                (d.state != InitialState::Rest).then(|| {
+                    format!(
+                        "{}: {}",
+                        file_lines(&path.display().to_string(), &l.lines),
+                        d.reason
+                    )
+                })
+            })
+            .collect();
+        if !moving.is_empty() {
+            return Ok(StepPair::Moving {
+                records: Box::new([high_read, low_read]),
+                why: moving.join("; "),
+            });
+        }
+    }
+    let (high_step, low_step) = std::thread::scope(|scope| {
+        let low_step = scope.spawn(|| judge_step(low, low_read));
+        let high_step = judge_step(high, high_read);
+        (high_step, low_step.join())
+    });
+    let low_step = low_step.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+    let high_step = load_step_given(high_step, quiet)?;
+    let low_step = load_step_given(low_step, quiet)?;
+    Ok(StepPair::Steps(Box::new((high_step, low_step))))
 }
 
-/// The step of a [`read_step`] or [`judge_step`] result, its warnings written first (unless
+/// The step of a [`judge_step`] result, its warnings written first (unless
 /// `quiet`).
 fn load_step_given(
     (warnings, step): (Vec<String>, Result<LoadedStep>),
@@ -229,25 +273,15 @@ fn load_step_given(
     step
 }
 
-/// [`load_step`] without writing: the clipping warnings (given before any error that follows
-/// them) and the step or the error.
-fn read_step(path: &Path, map: &ColumnMap) -> (Vec<String>, Result<LoadedStep>) {
-    match read_loaded(path, map, true) {
-        Ok(loaded) => judge_step(path, loaded),
-        Err(e) => (Vec::new(), Err(e)),
-    }
-}
-
-/// [`read_step`] of a record already read from `path`.
+/// [`load_step`] of a record already read from `path`, without writing: the clipping warnings
+/// (given before any error that follows them) and the step or the error.
 fn judge_step(path: &Path, loaded: Loaded) -> (Vec<String>, Result<LoadedStep>) {
     let shown = path.display().to_string();
     let (warnings, masks) = judge_record_clipping(&shown, &loaded);
     let step = masks.and_then(|masks| {
         let label = file_lines(&shown, &loaded.lines);
-        let initial = initial_state_of(&loaded.record);
         let mut step =
             step_from_record_with(label, loaded.record, loaded.voltage_lsb, loaded.current_lsb)?;
-        step.initial = initial;
         step.inputs.current_lsb_a = loaded.current_lsb.unwrap_or(0.0);
         step.path = shown;
         let from = loaded.lines.len() - step.current.len();
@@ -361,7 +395,6 @@ pub fn step_from_record_with(
         exclude_current: None,
         exclude_speed: None,
         inputs: loc.inputs(),
-        initial: None,
     })
 }
 

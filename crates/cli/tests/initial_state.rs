@@ -9,7 +9,7 @@ mod common;
 use std::path::Path;
 
 use common::{
-    assert_truth_in_intervals, motorid, scratch, simulate_to, stderr, stdout, LOGGER,
+    assert_truth_in_intervals, motorid, motorid_fed, scratch, simulate_to, stderr, stdout, LOGGER,
     SMALL_SERVO_TRUTH,
 };
 use serde_json::Value;
@@ -138,6 +138,21 @@ fn a_step_pair_not_from_rest_goes_to_output_error_and_says_so() {
         "--json",
     ]);
     assert_eq!(forced["method"], "full");
+    // The high record through a pipe, which can be read only once: read once for both
+    // routes (read again for the output error, the pipe was found empty), the same report.
+    #[cfg(unix)]
+    {
+        let from_file = motorid(&["identify", "--high", &high, "--low", &low, "--json"]);
+        let piped = motorid_fed(
+            &["identify", "--high", "/dev/stdin", "--low", &low, "--json"],
+            std::fs::read(&high).unwrap(),
+        );
+        assert_eq!(piped.status.code(), Some(0), "{}", stderr(&piped));
+        assert_eq!(
+            stdout(&piped),
+            stdout(&from_file).replace(&high, "/dev/stdin")
+        );
+    }
 }
 
 /// A slice cut from the middle of a staircase, 5 ms after a step while the motor accelerates

@@ -20,11 +20,11 @@ use crate::args::{AxisArg, DriveArg, IdentifyArgs};
 use crate::figures::FigureRecord;
 use crate::output::outln;
 use crate::progress::Phases;
-use crate::record_csv::{read_loaded, read_loaded_current_optional, ColumnMap};
+use crate::record_csv::{read_loaded, read_loaded_current_optional, ColumnMap, Loaded};
 use crate::settings;
 use crate::steps::{
     common_channels, excited_from, file_lines, fit_excited_from, fit_voltage_speed, identify_pair,
-    in_order, load_step_pair, measured_channels, LoadedExcited, LoadedStep,
+    in_order, load_step_pair, measured_channels, LoadedExcited, LoadedStep, StepPair,
 };
 use crate::{BadInput, NotConverged};
 
@@ -734,7 +734,29 @@ pub fn run(a: &Settings) -> Result<()> {
         low.display(),
         bytes as f64 / 1e6
     ));
-    let (hv, lv) = load_step_pair(high, low, map, a.quiet)?;
+    // `--initial-state steady|free`: the step methods, which start every step from rest, do
+    // not apply.
+    if let Some(state) = a.initial_state.filter(|s| *s != fit::InitialState::Rest) {
+        drop(phases);
+        let note = from_rest_note(&format!("--initial-state {}", state.name()));
+        if !a.quiet && !a.json {
+            crate::output::errln!("note: {note}");
+        }
+        return run_output_error(a, &[high.clone(), low.clone()], Some(&note));
+    }
+    let assume_rest = a.initial_state == Some(fit::InitialState::Rest);
+    let (hv, lv) = match load_step_pair(high, low, map, a.quiet, assume_rest)? {
+        StepPair::Steps(pair) => *pair,
+        StepPair::Moving { records, why } => {
+            drop(phases);
+            let note = from_rest_note(&why);
+            if !a.quiet && !a.json {
+                crate::output::errln!("note: {note}");
+            }
+            let [h, l] = *records;
+            return fit_output_error(a, &[high.clone(), low.clone()], vec![h, l], Some(&note));
+        }
+    };
     let kind = RecordKind::decide(
         common_channels(&[hv.channels, lv.channels]),
         Drive::Voltage,
@@ -743,16 +765,6 @@ pub fn run(a: &Settings) -> Result<()> {
     )
     .map_err(|why| kinds::refused(&format!("{} / {}", hv.label, lv.label), why))?;
     let (hv, lv, swapped) = in_order(hv, lv);
-    if let Some(why) = not_from_rest(a, [&hv, &lv]) {
-        let note = format!(
-            "the step methods need records that start at rest ({why}): both records are fitted whole by output error"
-        );
-        if !a.quiet && !a.json {
-            crate::output::errln!("note: {note}");
-        }
-        drop(phases);
-        return run_output_error(a, &[high.clone(), low.clone()], Some(&note));
-    }
     if !a.quiet {
         if let Some(note) = swapped {
             crate::output::errln!("note: {note}");
@@ -806,25 +818,13 @@ pub fn run(a: &Settings) -> Result<()> {
     outcome
 }
 
-/// Why a step pair cannot be fitted by the step methods, which start every step from rest:
-/// `--initial-state steady|free`, or a record whose first samples show a running motor (unless
-/// `--initial-state rest`); `None` for a pair from rest.
-fn not_from_rest(a: &Settings, steps: [&crate::steps::LoadedStep; 2]) -> Option<String> {
-    match a.initial_state {
-        Some(fit::InitialState::Rest) => None,
-        Some(state) => Some(format!("--initial-state {}", state.name())),
-        None => {
-            let moving: Vec<String> = steps
-                .iter()
-                .filter_map(|s| {
-                    let d = s.initial.as_ref()?;
-                    (d.state != fit::InitialState::Rest)
-                        .then(|| format!("{}: {}", s.label, d.reason))
-                })
-                .collect();
-            (!moving.is_empty()).then(|| moving.join("; "))
-        }
-    }
+/// The note of a step pair fitted whole by output error because the step methods, which start
+/// every step from rest, do not apply (`why`: `--initial-state steady|free`, or the records
+/// whose first samples show a running motor).
+fn from_rest_note(why: &str) -> String {
+    format!(
+        "the step methods need records that start at rest ({why}): both records are fitted whole by output error"
+    )
 }
 
 /// `--record A.csv --record B.csv ...` (or a step pair that does not start at rest): all six
@@ -832,12 +832,25 @@ fn not_from_rest(a: &Settings, steps: [&crate::steps::LoadedStep; 2]) -> Option<
 /// `--initial-state` gives or its first samples show, or kS, kV, kA (and J, f, Ts with R and k
 /// given) from records without a usable current; `note` says why a step pair came here.
 fn run_output_error(a: &Settings, paths: &[PathBuf], note: Option<&str>) -> Result<()> {
-    let map = &a.columns;
+    let read = paths
+        .iter()
+        .map(|path| read_loaded_current_optional(path, &a.columns))
+        .collect::<Result<Vec<_>>>()?;
+    fit_output_error(a, paths, read, note)
+}
+
+/// [`run_output_error`] of the records `read` from `paths` (each file is read once: a pipe
+/// serves as a file does).
+fn fit_output_error(
+    a: &Settings,
+    paths: &[PathBuf],
+    records: Vec<Loaded>,
+    note: Option<&str>,
+) -> Result<()> {
     let known = a.known;
     let mut channels = Vec::new();
     let mut read = Vec::new();
-    for path in paths {
-        let loaded = read_loaded_current_optional(path, map)?;
+    for (path, loaded) in paths.iter().zip(records) {
         let c = measured_channels(&loaded.record, loaded.current_lsb);
         let header = loaded.lines.first().map_or(1, |l| l.saturating_sub(1));
         // Each record on its own first, so that a refusal names its file.
