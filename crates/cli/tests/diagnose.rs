@@ -469,3 +469,40 @@ fn a_high_step_on_standard_input_is_diagnosed_as_its_file_is() {
         stdout(&from_file).replace(&high, "/dev/stdin")
     );
 }
+
+/// A low step whose times are in seconds under a `t[ms]` header (a record sampled at 5 MHz
+/// beside a 5 kHz one): the nominal fit explains it worse than its mean, and the diagnosis says
+/// so (exit 3). The simulations of the candidates' refits used to be bounded per sample of the
+/// fastest record only, a thousand times too loose for the slow one, and the diagnosis ran for
+/// hours; the limit below only keeps a hang from stopping the suite.
+#[test]
+fn a_record_whose_times_are_in_another_unit_ends_in_a_refusal_not_a_hang() {
+    let dir = scratch("diagnose_units");
+    let [high, low] = small_servo_steps(&dir, None);
+    let text = std::fs::read_to_string(&low).unwrap();
+    assert!(text.contains("\nt[s],"), "the header as simulate writes it");
+    let ms = dir.join("ms.csv");
+    std::fs::write(&ms, text.replace("\nt[s],", "\nt[ms],")).unwrap();
+    let out = common::motorid_within(
+        &[
+            "diagnose",
+            "--high",
+            &high,
+            "--low",
+            ms.to_str().unwrap(),
+            "--candidates",
+            "cogging_torque,quadratic_drag",
+            "--max-effects",
+            "1",
+            "--quiet",
+        ],
+        std::time::Duration::from_secs(600),
+    )
+    .expect("the diagnosis ends");
+    assert_eq!(out.status.code(), Some(3), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("the nominal model is not a result"),
+        "{}",
+        stderr(&out)
+    );
+}

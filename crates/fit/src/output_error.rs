@@ -58,9 +58,9 @@ const FD_STEP: f64 = 1e-6;
 const INTERVAL_FD_STEP: f64 = 1e-4;
 /// Fraction of the start's own RK4 step used for the whole fit (room for faster parameters).
 const STEP_MARGIN: f64 = 0.5;
-/// Most RK4 steps per record sample a simulation may take (a time constant 2.5 times below
-/// the sample period: 1/40 of it per step, with [`STEP_MARGIN`]); faster time constants are
-/// outside what the records show.
+/// Most RK4 steps per record sample a simulation may take on average over the records (a time
+/// constant 2.5 times below the sample period: 1/40 of it per step, with [`STEP_MARGIN`]);
+/// faster time constants are outside what the records show.
 // A record sampled fifty times slower than τe took minutes a fit at 1000 steps a sample, for
 // an L that its current, settled at every sample, cannot show.
 const MAX_STEPS_PER_SAMPLE: f64 = 200.0;
@@ -593,8 +593,8 @@ impl OeProblem {
     }
 
     /// Uses the step that suits `motor` and `effects` from now on; `None` (and no change)
-    /// where that step would cost more than [`MAX_STEPS_PER_SAMPLE`] RK4 steps per sample of
-    /// the fastest record: a time constant that far below the sample period is outside what
+    /// where that step would cost more than [`MAX_STEPS_PER_SAMPLE`] RK4 steps per sample
+    /// ([`OeProblem::within_work_bound`]): a time constant that far below the sample period is outside what
     /// the records show, and simulating it would take without bound.
     fn set_step_for(&self, motor: &MotorParams, effects: &Effects) -> Option<()> {
         let h = self.within_work_bound(motor, effects)?;
@@ -602,16 +602,20 @@ impl OeProblem {
         Some(())
     }
 
-    /// The RK4 step for `motor` and `effects`, `None` where it would take more than
-    /// [`MAX_STEPS_PER_SAMPLE`] steps per sample of the fastest record.
+    /// The RK4 step for `motor` and `effects`, `None` where simulating every record would take
+    /// more than [`MAX_STEPS_PER_SAMPLE`] steps per sample of the records together (each
+    /// sample at least one step). Records at one rate: the step is at least 1/200 of their
+    /// period. Records at rates far apart (one whose times are in another unit than its header
+    /// says): the slow records' steps count too — bounded by the fastest record's period alone,
+    /// a record sampled a thousand times slower took 1000 × 200 steps a sample, and `diagnose`
+    /// ran for hours.
     fn within_work_bound(&self, motor: &MotorParams, effects: &Effects) -> Option<f64> {
         let h = self.step_for(motor, effects)?;
-        let dt_min = self
-            .records
-            .iter()
-            .map(|r| r.dt)
-            .fold(f64::INFINITY, f64::min);
-        (h * MAX_STEPS_PER_SAMPLE >= dt_min).then_some(h)
+        let (steps, samples) = self.records.iter().fold((0.0, 0.0), |(steps, samples), r| {
+            let n = r.n as f64;
+            (steps + n * (r.dt / h).ceil().max(1.0), samples + n)
+        });
+        (steps <= MAX_STEPS_PER_SAMPLE * samples).then_some(h)
     }
 
     /// The simulated channels of every record at `theta`: `[record][channel][kept sample]`.

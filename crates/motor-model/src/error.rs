@@ -31,6 +31,24 @@ pub enum ModelError {
         /// What is wrong with it.
         reason: String,
     },
+    /// A simulation would take more RK4 steps than its bound
+    /// ([`crate::MAX_RK4_STEPS_PER_SAMPLE`] a sample on average): a time constant
+    /// of the model (a brush drop's knee, a deep saturation) or an effect's step limit (a fast
+    /// cogging) far below the sample period.
+    TooStiff {
+        /// The bound \[RK4 steps\].
+        budget: f64,
+        /// Where the bound ran out \[s\] (0: refused before the start).
+        at_s: f64,
+        /// The longest step the model's fastest time constant allows \[s\] (1/40 of it).
+        max_step_s: f64,
+    },
+    /// The simulated state left the finite numbers: the model's parameters make it blow up
+    /// (an effect far outside a motor's range), or a step too long for its dynamics.
+    Diverged {
+        /// The first sample where it was found \[s\].
+        at_s: f64,
+    },
     /// An analytic formula was asked for outside its domain (wrong damping regime, no breakaway).
     OutOfDomain {
         /// Which formula.
@@ -56,6 +74,27 @@ impl fmt::Display for ModelError {
             ModelError::EffectSpec { spec, reason } => {
                 write!(f, "effect `{spec}`: {reason}")
             }
+            ModelError::TooStiff {
+                budget,
+                at_s,
+                max_step_s,
+            } => {
+                write!(
+                    f,
+                    "the simulation would take more than {budget:.1e} RK4 steps (its step is at most {max_step_s:.3e} s, 1/40 of the model's fastest time constant"
+                )?;
+                if *at_s > 0.0 {
+                    write!(f, ", or shorter where an effect needs; it ran out at t = {at_s:.6} s")?;
+                }
+                write!(
+                    f,
+                    "): a time constant this far below the sample period (a brush drop's knee this sharp, an inductance saturating this deep, a cogging this fast) is out of the simulator's reach — make the effect smoother or sample faster"
+                )
+            }
+            ModelError::Diverged { at_s } => write!(
+                f,
+                "the simulation diverged (a value no longer finite at t = {at_s:.6} s): the parameters make the model blow up — an effect far outside a motor's range"
+            ),
             ModelError::OutOfDomain { formula, reason } => {
                 write!(f, "{formula} does not apply: {reason}")
             }

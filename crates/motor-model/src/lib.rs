@@ -61,7 +61,9 @@ pub use sim::effects::{
     COPPER_ALPHA_PER_K, EFFECT_NAMES,
 };
 pub use sim::input::Input;
-pub use sim::simulator::{simulate, Simulator, Trace, MAX_SAMPLES, MAX_STATES};
+pub use sim::simulator::{
+    simulate, Simulator, Trace, MAX_RK4_STEPS_PER_SAMPLE, MAX_SAMPLES, MAX_STATES,
+};
 pub use steady::{
     breakaway_time, standstill_current, steady_state, ApparentResistance, SteadyState,
 };

@@ -46,6 +46,10 @@ const EVENT_BISECTIONS: u32 = 48;
 const MAX_EVENTS_PER_STEP: u32 = 8;
 /// Longest record the simulator will produce, in samples (about 80 MB of output).
 pub const MAX_SAMPLES: usize = 10_000_000;
+/// Most RK4 steps a run may take per sample it produces, on average ([`Simulator::run`]).
+pub const MAX_RK4_STEPS_PER_SAMPLE: f64 = 10_000.0;
+/// Steps a run may take whatever its length ([`MAX_RK4_STEPS_PER_SAMPLE`] below it).
+const MIN_STEP_BUDGET: f64 = 1e6;
 /// Capacity of the state vector: `[I, Ω, θ]` and the effects' own states.
 pub const MAX_STATES: usize = 8;
 
@@ -330,18 +334,41 @@ impl Simulator {
                 return Ok(trace);
             }
         }
-        Ok(match self.n_states {
-            3 => self.run_sized::<3>(n, dt),
-            4 => self.run_sized::<4>(n, dt),
-            5 => self.run_sized::<5>(n, dt),
-            6 => self.run_sized::<6>(n, dt),
-            7 => self.run_sized::<7>(n, dt),
-            _ => self.run_sized::<MAX_STATES>(n, dt),
-        })
+        // The work bound: refused at once where the step alone exceeds it, else counted (an
+        // effect's step may shorten with the state).
+        let budget = (MAX_RK4_STEPS_PER_SAMPLE * n as f64).max(MIN_STEP_BUDGET);
+        let needed = n as f64 * (dt / self.max_step_s).ceil().max(1.0);
+        if needed > budget {
+            return Err(self.too_stiff(budget, 0.0));
+        }
+        match self.n_states {
+            3 => self.run_sized::<3>(n, dt, budget),
+            4 => self.run_sized::<4>(n, dt, budget),
+            5 => self.run_sized::<5>(n, dt, budget),
+            6 => self.run_sized::<6>(n, dt, budget),
+            7 => self.run_sized::<7>(n, dt, budget),
+            _ => self.run_sized::<MAX_STATES>(n, dt, budget),
+        }
     }
 
-    /// [`Simulator::run`] on `n` samples every `dt` \[s\] with a state of `N` numbers.
-    fn run_sized<const N: usize>(&self, n: usize, dt: f64) -> Trace {
+    /// The refusal of a run that would take more than `budget` RK4 steps, `at_s` \[s\] where
+    /// it ran out (0: refused before the start).
+    fn too_stiff(&self, budget: f64, at_s: f64) -> ModelError {
+        ModelError::TooStiff {
+            budget,
+            at_s,
+            max_step_s: self.max_step_s,
+        }
+    }
+
+    /// [`Simulator::run`] on `n` samples every `dt` \[s\] with a state of `N` numbers, in at
+    /// most `budget` RK4 steps; refused where the state leaves the finite numbers.
+    fn run_sized<const N: usize>(
+        &self,
+        n: usize,
+        dt: f64,
+        budget: f64,
+    ) -> Result<Trace, ModelError> {
         let mut trace = Trace::with_capacity(n);
         let sensor = self.sensor.filter(|&s| s < N).unwrap_or(I_IDX);
         let mut x: State<N> = [0.0; N];
@@ -355,16 +382,24 @@ impl Simulator {
             Mode::Moving(w0.signum())
         };
         let mut t = 0.0;
+        let mut left = budget;
         for i in 0..n {
             let t_i = i as f64 * dt;
             // Integrate to t_i, splitting at every jump of E(t) on the way.
             while let Some(t_jump) = self.input.next_jump_after(t).filter(|&tj| tj < t_i) {
-                self.integrate(&mut x, &mut mode, t, t_jump);
-                t = t_jump;
+                t = self.integrate(&mut x, &mut mode, t, t_jump, &mut left);
+                if t < t_jump {
+                    return Err(self.too_stiff(budget, t));
+                }
             }
             if t_i > t {
-                self.integrate(&mut x, &mut mode, t, t_i);
-                t = t_i;
+                t = self.integrate(&mut x, &mut mode, t, t_i, &mut left);
+                if t < t_i {
+                    return Err(self.too_stiff(budget, t));
+                }
+            }
+            if !x.iter().all(|v| v.is_finite()) {
+                return Err(ModelError::Diverged { at_s: t_i });
             }
             trace.t.push(t_i);
             trace.voltage.push(self.input.volts_at(t_i));
@@ -374,11 +409,20 @@ impl Simulator {
             trace.position.push(x[TH_IDX]);
             trace.stuck.push(mode == Mode::Stuck);
         }
-        trace
+        Ok(trace)
     }
 
-    /// Advances `x` from `t_from` to `t_to` in RK4 steps no longer than the plant allows.
-    fn integrate<const N: usize>(&self, x: &mut State<N>, mode: &mut Mode, t_from: f64, t_to: f64) {
+    /// Advances `x` from `t_from` to `t_to` in RK4 steps no longer than the plant allows, each
+    /// taken from the `left` steps of the run's budget: the time reached (`t_to`, or earlier
+    /// where the budget ran out).
+    fn integrate<const N: usize>(
+        &self,
+        x: &mut State<N>,
+        mode: &mut Mode,
+        t_from: f64,
+        t_to: f64,
+        left: &mut f64,
+    ) -> f64 {
         // A step or piecewise-constant voltage is split at its jumps (`run_sized`), so it holds
         // one level over the whole interval: read once, not at every RK4 stage.
         let held = matches!(self.input, Input::Step { .. } | Input::Piecewise { .. })
@@ -394,10 +438,15 @@ impl Simulator {
             let remaining = t_to - t;
             // Spread the steps evenly over the remaining interval.
             let steps = (remaining / h).ceil().max(1.0);
+            if *left < 1.0 {
+                return t;
+            }
+            *left -= 1.0;
             let h = remaining / steps;
             self.step_with_events(x, mode, t, h, t_to, held);
             t = if steps <= 1.0 { t_to } else { t + h };
         }
+        t_to
     }
     /// One RK4 step of length `h` from `t`, switching mode at breakaway and zero crossings.
     ///
@@ -684,6 +733,55 @@ fn axpy<const N: usize>(x: &State<N>, a: f64, y: &State<N>) -> State<N> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sim::effects::{BrushDrop, QuadraticDrag};
+
+    fn paper_with(effect: Effect) -> Result<Trace, ModelError> {
+        Simulator::new(
+            MotorParams::paper(),
+            Effects::none().with(effect),
+            Input::step(40.0, 0.0)?,
+        )?
+        .run(0.5, 1000.0)
+    }
+
+    /// A brush drop whose knee (1 µA) makes the paper's motor's electrical time constant
+    /// L/(R + Vb/I_knee) = 0.3/(0.3 + 3e5) ≈ 1e-6 s, a thousandth of the 1 ms sample period:
+    /// refused before the start (20 million steps over 501 samples), not run for minutes.
+    #[test]
+    fn a_run_beyond_its_step_budget_is_refused_before_it_starts() {
+        let err = paper_with(Effect::BrushDrop(BrushDrop {
+            drop_v: 0.3,
+            knee_current_a: 1e-6,
+        }))
+        .expect_err("refused");
+        match err {
+            ModelError::TooStiff { budget, at_s, .. } => {
+                assert_eq!(at_s, 0.0);
+                assert_eq!(
+                    budget,
+                    MIN_STEP_BUDGET.max(MAX_RK4_STEPS_PER_SAMPLE * 501.0)
+                );
+            }
+            other => panic!("{other}"),
+        }
+        // A sharp but reachable knee still runs.
+        assert!(paper_with(Effect::BrushDrop(BrushDrop {
+            drop_v: 0.3,
+            knee_current_a: 0.05,
+        }))
+        .is_ok());
+    }
+
+    /// A drag of 1e10 N·m·s²/rad² blows the explicit integration up: refused, where the run
+    /// used to return a trace of NaN.
+    #[test]
+    fn a_run_whose_state_leaves_the_finite_numbers_is_refused() {
+        let err = paper_with(Effect::QuadraticDrag(QuadraticDrag {
+            c_nms2_per_rad2: 1e10,
+        }))
+        .expect_err("refused");
+        assert!(matches!(err, ModelError::Diverged { .. }), "{err}");
+    }
 
     /// The filter's output over one step by many small RK4 steps on the same cubic.
     fn by_small_steps(y0: f64, tau: f64, h: f64, ends: [f64; 4]) -> f64 {
