@@ -506,3 +506,30 @@ fn a_record_whose_times_are_in_another_unit_ends_in_a_refusal_not_a_hang() {
         stderr(&out)
     );
 }
+
+/// A low step whose current column reads 0 A throughout: refused as `identify` refuses it
+/// (exit 2, the file and what to check), where the diagnosis went on to a nominal fit whose
+/// weights were infinite and said it had failed (exit 3).
+#[test]
+fn a_record_whose_current_never_changes_is_refused_as_bad_input() {
+    let dir = scratch("diagnose_zero_current");
+    let [high, low] = small_servo_steps(&dir, None);
+    let text = std::fs::read_to_string(&low).unwrap();
+    let zeroed: Vec<String> = text
+        .lines()
+        .map(|line| {
+            let mut fields: Vec<&str> = line.split(',').collect();
+            if line.starts_with(|c: char| c.is_ascii_digit()) && fields.len() > 2 {
+                fields[2] = "0";
+            }
+            fields.join(",")
+        })
+        .collect();
+    let zero = dir.join("zero.csv");
+    std::fs::write(&zero, zeroed.join("\n") + "\n").unwrap();
+    let zero = zero.to_str().unwrap();
+    assert_bad_input(
+        &["diagnose", "--high", &high, "--low", zero, "--quiet"],
+        &format!("{zero}: the current is constant (0 A): is the current column right"),
+    );
+}

@@ -113,6 +113,22 @@ pub(crate) fn check_aligned(label: &str, c: Channels<'_>) -> Result<(), FitError
     Ok(())
 }
 
+/// The spread of `y`, max − min (its unit).
+fn span(y: &[f64]) -> f64 {
+    y.iter().fold(f64::NEG_INFINITY, |m, &v| m.max(v))
+        - y.iter().fold(f64::INFINITY, |m, &v| m.min(v))
+}
+
+/// Refuses a record whose current \[A\] never changes: a motor driven by a voltage draws a
+/// current that moves at least by its noise or an ADC step, so the column is not a current
+/// (or the motor was not connected); fitted, its noise floor of 0 makes every weight infinite.
+pub(crate) fn check_current_varies(label: &str, current: &[f64]) -> Result<(), FitError> {
+    if span(current) <= 0.0 {
+        return Err(bad(label, format!("the current is constant ({} A): is the current column right, and was the motor connected?", current.first().copied().unwrap_or(0.0))));
+    }
+    Ok(())
+}
+
 /// Basic soundness of one step test: enough samples, aligned finite channels, a real step,
 /// a current that varies, and (where speed or angle is measured) a rotor that moves.
 pub fn check_step_test(label: &str, t: &StepTest<'_>) -> Result<(), FitError> {
@@ -126,13 +142,7 @@ pub fn check_step_test(label: &str, t: &StepTest<'_>) -> Result<(), FitError> {
             format!("step of {} V: expected a non-zero finite step", t.volts),
         ));
     }
-    let span = |y: &[f64]| {
-        y.iter().fold(f64::NEG_INFINITY, |m, &v| m.max(v))
-            - y.iter().fold(f64::INFINITY, |m, &v| m.min(v))
-    };
-    if span(t.current) <= 0.0 {
-        return Err(bad(label, format!("the current is constant ({} A): is the current column right, and was the motor connected?", t.current[0])));
-    }
+    check_current_varies(label, t.current)?;
     let moved = match (t.position, t.speed) {
         (Some(angle), _) => span(angle) > 0.0,
         // A tachometer's noise is no motion.

@@ -1769,6 +1769,7 @@ pub fn diagnose(
     let shown = super::record_names(names, records.len() + validation.len());
     for (r, name) in records.iter().chain(validation).zip(&shown) {
         crate::checks::check_aligned(name, r.channels())?;
+        crate::checks::check_current_varies(name, r.current)?;
     }
     // The training records: whole, or with their held-out blocks excluded.
     let masks =
