@@ -108,7 +108,11 @@ pub fn check(outputs: &[Declared]) -> Result<()> {
     for declared in outputs {
         let (flag, path, verdict) = match declared {
             Declared::File { flag, path } => (flag, path, resolve(path).map(|_| ())),
-            Declared::Dir { flag, path } => (flag, path, creatable_dir(path)),
+            Declared::Dir { flag, path } => (
+                flag,
+                path,
+                creatable_dir(path).and_then(|()| blocked_entry(path).map_or(Ok(()), Err)),
+            ),
         };
         verdict.map_err(|why| BadInput(format!("{flag} {}: {why}", path.display())))?;
     }
@@ -118,6 +122,56 @@ pub fn check(outputs: &[Declared]) -> Result<()> {
 /// Creates the folder `dir` and any missing parents (a folder already there is fine).
 pub fn create_dir(dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| anyhow!("cannot create {}: {e}", dir.display()))
+}
+
+/// Extensions of the files commands name themselves inside an output folder (`--plot DIR`,
+/// `--out DIR`): figures, summaries.
+const GENERATED_EXTENSIONS: [&str; 4] = ["svg", "png", "csv", "json"];
+
+/// Writes `bytes` to `path`, a name the command made up inside an output folder (a figure, a
+/// summary): only a regular file there is replaced (atomically, as [`write`] does) or a new
+/// name taken. A symbolic link, FIFO, device or folder of that name is refused as bad input
+/// naming it: unlike a path given on the command line, nobody chose it as the target, and
+/// following it would replace another file or wait for a reader without end.
+pub fn write_generated(path: &Path, bytes: &[u8]) -> Result<()> {
+    match std::fs::symlink_metadata(path) {
+        Ok(meta) if !meta.file_type().is_file() => Err(BadInput(format!(
+            "cannot write {}: {}",
+            path.display(),
+            not_regular(&meta)
+        ))
+        .into()),
+        _ => write(path, bytes),
+    }
+}
+
+/// Why an entry named by the command itself is not written: what it is, and what to do.
+fn not_regular(meta: &std::fs::Metadata) -> String {
+    let kind = meta.file_type();
+    let what = if kind.is_symlink() {
+        "a symbolic link"
+    } else if kind.is_dir() {
+        "a directory"
+    } else {
+        "not a regular file (a FIFO, a device or a socket)"
+    };
+    format!("it is {what}, which is not replaced: move it away or choose another folder")
+}
+
+/// The first entry of the folder `dir` (if it exists) with a name the commands write there
+/// ([`GENERATED_EXTENSIONS`]) that [`write_generated`] would refuse, and why.
+fn blocked_entry(dir: &Path) -> Option<String> {
+    let entries = std::fs::read_dir(dir).ok()?;
+    entries.flatten().find_map(|entry| {
+        let path = entry.path();
+        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+        if !GENERATED_EXTENSIONS.contains(&ext.as_str()) {
+            return None;
+        }
+        let meta = std::fs::symlink_metadata(&path).ok()?;
+        (!meta.file_type().is_file())
+            .then(|| format!("{} is in the way: {}", path.display(), not_regular(&meta)))
+    })
 }
 
 /// Writes `bytes` to `path` as the module overview describes.

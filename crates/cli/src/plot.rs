@@ -195,7 +195,7 @@ fn render(
         SVGBackend::with_string(&mut svg, size).into_drawing_area(),
         &svg_path,
     )?;
-    output::write(&svg_path, svg.as_bytes())?;
+    output::write_generated(&svg_path, svg.as_bytes())?;
     let mut pixels = vec![0u8; size.0 as usize * size.1 as usize * 3];
     draw_png(
         BitMapBackend::with_buffer(&mut pixels, size).into_drawing_area(),
@@ -208,7 +208,7 @@ fn render(
             .write_image(&pixels, size.0, size.1, image::ColorType::Rgb8)
             .map_err(|e| anyhow!("encoding {}: {e}", png_path.display()))?;
     }
-    output::write(&png_path, &png)?;
+    output::write_generated(&png_path, &png)?;
     Ok([svg_path, png_path])
 }
 

@@ -533,3 +533,40 @@ fn a_record_whose_current_never_changes_is_refused_as_bad_input() {
         &format!("{zero}: the current is constant (0 A): is the current column right"),
     );
 }
+
+/// Inside `--plot DIR`, the figures' names are the command's own: a symbolic link of such a
+/// name (to a file of the user's) and a FIFO are refused before any work (exit 2, naming
+/// `--plot`), where the link's target was replaced by a figure and the FIFO waited for a
+/// reader without end.
+#[cfg(unix)]
+#[test]
+fn figure_names_taken_by_a_link_or_a_fifo_are_refused_before_the_diagnosis() {
+    let dir = scratch("diagnose_plot_obstacles");
+    let [high, low] = small_servo_steps(&dir, None);
+    let precious = dir.join("precious.txt");
+    std::fs::write(&precious, "keep me").unwrap();
+    let linked = dir.join("linked");
+    std::fs::create_dir(&linked).unwrap();
+    std::os::unix::fs::symlink(&precious, linked.join("s12_current_residual.png")).unwrap();
+    let linked = linked.to_str().unwrap();
+    assert_bad_input(
+        &["diagnose", "--high", &high, "--low", &low, "--plot", linked],
+        &format!("--plot {linked}: {linked}/s12_current_residual.png is in the way: it is a symbolic link"),
+    );
+    assert_eq!(std::fs::read_to_string(&precious).unwrap(), "keep me");
+    let piped = dir.join("piped");
+    std::fs::create_dir(&piped).unwrap();
+    common::make_fifo(&piped.join("s3_current_residual.svg"));
+    let piped = piped.to_str().unwrap();
+    let out = common::motorid_within(
+        &["diagnose", "--high", &high, "--low", &low, "--plot", piped],
+        std::time::Duration::from_secs(600),
+    )
+    .expect("no wait on the FIFO");
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("is in the way: it is not a regular file"),
+        "{}",
+        stderr(&out)
+    );
+}

@@ -114,7 +114,7 @@ pub fn run(a: &Settings) -> Result<()> {
         let logger = Logger::paper(duration, rate);
         let dir = a.out.join(&name);
         std::fs::create_dir_all(&dir)?;
-        output::write(
+        output::write_generated(
             &dir.join("motor.json"),
             serde_json::to_string_pretty(&motor)?.as_bytes(),
         )?;

@@ -301,7 +301,7 @@ pub fn run(a: &Settings, dir: &Path) -> Result<()> {
     let elapsed = started.elapsed().as_secs_f64();
     let csv_path = dir.join("summary.csv");
     let json_path = dir.join("summary.json");
-    output::write(&csv_path, summary_csv(&rows).as_bytes())?;
+    output::write_generated(&csv_path, summary_csv(&rows).as_bytes())?;
     let ok = rows
         .iter()
         .filter(|r| matches!(&r.outcome, Outcome::Fitted(f) if f.accepted()))
@@ -328,7 +328,7 @@ pub fn run(a: &Settings, dir: &Path) -> Result<()> {
         })).collect::<Vec<_>>(),
         "rows": rows.iter().map(row_json).collect::<Vec<_>>(),
     });
-    output::write(
+    output::write_generated(
         &json_path,
         serde_json::to_string_pretty(&report)?.as_bytes(),
     )?;
