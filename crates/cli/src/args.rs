@@ -43,6 +43,12 @@ pub enum Command {
     Diagnose(DiagnoseArgs),
 }
 
+/// `--cutoff` of `--input current` when not given \[Hz\]: the inverse model's zero-phase
+/// position filter.
+pub const DEFAULT_CUTOFF_HZ: f64 = 100.0;
+/// `--decimation` of `--input current` when not given.
+pub const DEFAULT_DECIMATION: usize = 10;
+
 #[derive(Debug, Args)]
 pub struct DiagnoseArgs {
     /// High-voltage step record (CSV: t, voltage, current and speed or position).
@@ -75,15 +81,15 @@ pub struct DiagnoseArgs {
     /// With --input current: torque (force) per unit of the current column [N·m/A or N/A].
     #[arg(long, value_name = "K")]
     pub torque_constant: Option<f64>,
-    /// With --input current: cut-off of the zero-phase position filter [Hz].
-    #[arg(long, value_name = "HZ", default_value_t = 100.0)]
-    pub cutoff: f64,
-    /// With --input current: decimation factor of the parallel filtering.
-    #[arg(long, value_name = "N", default_value_t = 10)]
-    pub decimation: usize,
-    /// With --input current: rotary axis (rad) or linear axis (m).
-    #[arg(long, value_enum, default_value = "rotary")]
-    pub axis: AxisArg,
+    /// With --input current: cut-off of the zero-phase position filter [Hz] (default 100).
+    #[arg(long, value_name = "HZ")]
+    pub cutoff: Option<f64>,
+    /// With --input current: decimation factor of the parallel filtering (default 10).
+    #[arg(long, value_name = "N")]
+    pub decimation: Option<usize>,
+    /// With --input current: rotary axis (rad) or linear axis (m) (default rotary).
+    #[arg(long, value_enum)]
+    pub axis: Option<AxisArg>,
     /// Write figures (SVG and PNG): the residual of each record and channel before and after
     /// the chosen effect.
     #[arg(long, value_name = "DIR")]
@@ -343,10 +349,10 @@ pub struct IdentifyArgs {
     #[arg(long, value_enum, default_value = "rotary")]
     pub axis: AxisArg,
     /// Cut-off of the zero-phase position filter for --input current [Hz].
-    #[arg(long, value_name = "HZ", default_value_t = 100.0)]
+    #[arg(long, value_name = "HZ", default_value_t = DEFAULT_CUTOFF_HZ)]
     pub cutoff: f64,
     /// Decimation factor of the parallel filtering for --input current.
-    #[arg(long, value_name = "N", default_value_t = 10)]
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_DECIMATION)]
     pub decimation: usize,
     /// Print one JSON object instead of tables.
     #[arg(long)]

@@ -570,3 +570,22 @@ fn figure_names_taken_by_a_link_or_a_fifo_are_refused_before_the_diagnosis() {
         stderr(&out)
     );
 }
+
+/// The inverse model's options on a voltage-driven diagnosis are refused (exit 2), not
+/// ignored without a word.
+#[test]
+fn options_of_a_current_driven_axis_are_refused_without_input_current() {
+    let dir = scratch("diagnose_current_options");
+    let [high, low] = small_servo_steps(&dir, None);
+    for (flag, value) in [
+        ("--torque-constant", "0.05"),
+        ("--cutoff", "5"),
+        ("--decimation", "2"),
+        ("--axis", "linear"),
+    ] {
+        assert_bad_input(
+            &["diagnose", "--high", &high, "--low", &low, flag, value],
+            &format!("{flag} applies to a current-driven axis only: add --input current"),
+        );
+    }
+}

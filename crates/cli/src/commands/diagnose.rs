@@ -122,6 +122,20 @@ pub fn settings(a: &DiagnoseArgs) -> Result<Settings> {
     if a.input == DriveArg::Current {
         return current_settings(a);
     }
+    // The options of the inverse model mean nothing to a voltage-driven diagnosis: given, they
+    // would be ignored without a word.
+    let current_only = [
+        ("--torque-constant", a.torque_constant.is_some()),
+        ("--cutoff", a.cutoff.is_some()),
+        ("--decimation", a.decimation.is_some()),
+        ("--axis", a.axis.is_some()),
+    ];
+    if let Some((flag, _)) = current_only.iter().find(|(_, given)| *given) {
+        return Err(BadInput(format!(
+            "{flag} applies to a current-driven axis only: add --input current (with --record files of current and position), or leave {flag} out"
+        ))
+        .into());
+    }
     let mut training: Vec<PathBuf> = a.high.iter().chain(&a.low).cloned().collect();
     training.extend(a.records.iter().cloned());
     if training.is_empty() {
@@ -175,7 +189,8 @@ fn current_settings(a: &DiagnoseArgs) -> Result<Settings> {
     if !(k.is_finite() && k > 0.0) {
         return Err(BadInput(format!("--torque-constant {k}: expected a positive number")).into());
     }
-    if a.decimation == 0 {
+    let decimation = a.decimation.unwrap_or(crate::args::DEFAULT_DECIMATION);
+    if decimation == 0 {
         return Err(
             BadInput("--decimation 0: expected a factor of 1 (none) or more".into()).into(),
         );
@@ -188,7 +203,7 @@ fn current_settings(a: &DiagnoseArgs) -> Result<Settings> {
         Some(text) => ColumnMap::parse(text)?,
         None => ColumnMap::default(),
     };
-    let geometry = match a.axis {
+    let geometry = match a.axis.unwrap_or(AxisArg::Rotary) {
         AxisArg::Rotary => AxisGeometry::Rotary,
         AxisArg::Linear => AxisGeometry::Linear,
     };
@@ -202,8 +217,8 @@ fn current_settings(a: &DiagnoseArgs) -> Result<Settings> {
             torque_constant: k,
             inverse: InverseDiagnoseSettings {
                 inverse: InverseModelSettings {
-                    position_cutoff_hz: a.cutoff,
-                    decimation: a.decimation,
+                    position_cutoff_hz: a.cutoff.unwrap_or(crate::args::DEFAULT_CUTOFF_HZ),
+                    decimation,
                     ..InverseModelSettings::default()
                 },
                 geometry,
