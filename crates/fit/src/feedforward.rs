@@ -1027,7 +1027,7 @@ pub fn identify_feedforward(
     if !(peak_w > 0.0 && peak_e > 0.0) {
         return Err(bad(
             "records",
-            "the motor never moves: nothing to identify".into(),
+            "the motor never moves: nothing to identify — record it with a voltage that breaks the friction, Eq. (11)".into(),
         ));
     }
     let kv0 = if kv0 > 0.0 { kv0 } else { peak_e / peak_w };

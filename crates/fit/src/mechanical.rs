@@ -251,7 +251,7 @@ fn record_rows(
     if peak_speed == 0.0 || !quantum.is_finite() {
         return Err(bad(
             "position",
-            "the axis never moves: nothing to identify".into(),
+            "the axis never moves: nothing to identify — record it with a voltage (or current command) that breaks the friction, Eq. (11)".into(),
         ));
     }
     let rest_speed = (0.5 * quantum * std::f64::consts::TAU * settings.position_cutoff_hz)

@@ -274,7 +274,10 @@ pub fn run(s: &Settings) -> Result<()> {
         Ok([(high, hv), (low, lv)]) => {
             let hv = step_from(high, hv, true)?;
             let lv = step_from(low, lv, true)?;
-            let (hv, lv, _) = in_order(hv, lv);
+            let (hv, lv, swapped) = in_order(hv, lv);
+            if let Some(note) = swapped.filter(|_| !s.quiet) {
+                crate::output::errln!("note: {note}");
+            }
             identify_pair(&hv, &lv, StepMethod::Paper)
                 .ok()
                 .and_then(|r| r.params())
