@@ -501,14 +501,17 @@ impl TableParser {
             count += 1;
         }
         if count != width {
-            let fields = if count > width {
-                line.split(',').count()
+            let (fields, hint) = if count > width {
+                (
+                    line.split(',').count(),
+                    "a stray comma, or lines of two files run together?",
+                )
             } else {
-                count
+                (count, "a line cut short?")
             };
             return Err((
                 line_no,
-                format!("{fields} fields where the header has {width} (a line cut short?)"),
+                format!("{fields} fields where the header has {width} ({hint})"),
             ));
         }
         table.lines.push(line_no);

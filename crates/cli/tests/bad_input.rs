@@ -140,7 +140,7 @@ fn broken_files_give_one_line_errors_naming_file_and_line() {
         (
             "too_many_fields.csv",
             format!("{HEADER}{}0.5,40,1,1,9\n", rows(3)).into_bytes(),
-            ":5: 5 fields where the header has 4",
+            ":5: 5 fields where the header has 4 (a stray comma",
         ),
         (
             "semicolons.csv",

@@ -224,6 +224,11 @@ fn effect_specs_parse_and_errors_say_what_to_fix() {
         ("cogging_torque:amp=0.1,n=2.5", "whole number"),
         ("current_sensor_lag:tau=-1", "greater than zero"),
         ("brush_drop:vb=1,volts=2", "unknown key `volts`"),
+        // A misspelt required key is named as unknown, not as the one missing.
+        (
+            "brush_drop:xx=1",
+            "unknown key `xx`; this effect takes vb, knee",
+        ),
         ("inductance_saturation:isat=1,ratio=2", "(0, 1]"),
         ("quadratic_drag:c", "key=value"),
     ];

@@ -673,6 +673,25 @@ impl<'a> SpecArgs<'a> {
     /// The values of `table`'s keys, defaults for those not given; refuses a missing required
     /// key and any key the table does not have.
     fn values(mut self, table: &[ParamSpec]) -> Result<Vec<f64>, ModelError> {
+        // An unknown key first: `vb` misspelt is a typo to name, not a missing `vb=`.
+        if let Some((key, _)) = self
+            .pairs
+            .iter()
+            .find(|(k, _)| table.iter().all(|p| p.key != *k))
+        {
+            let known: Vec<&str> = table.iter().map(|p| p.key).collect();
+            return Err(ModelError::EffectSpec {
+                spec: self.spec.to_string(),
+                reason: if known.is_empty() {
+                    format!("unknown key `{key}`; this effect takes no parameters")
+                } else {
+                    format!(
+                        "unknown key `{key}`; this effect takes {}",
+                        known.join(", ")
+                    )
+                },
+            });
+        }
         let mut out = Vec::with_capacity(table.len());
         for p in table {
             let given = self
@@ -686,23 +705,7 @@ impl<'a> SpecArgs<'a> {
             })?;
             out.push(value);
         }
-        match self.pairs.first() {
-            None => Ok(out),
-            Some((key, _)) => {
-                let known: Vec<&str> = table.iter().map(|p| p.key).collect();
-                Err(ModelError::EffectSpec {
-                    spec: self.spec.to_string(),
-                    reason: if known.is_empty() {
-                        format!("unknown key `{key}`; this effect takes no parameters")
-                    } else {
-                        format!(
-                            "unknown key `{key}`; this effect takes {}",
-                            known.join(", ")
-                        )
-                    },
-                })
-            }
-        }
+        Ok(out)
     }
 }
 
