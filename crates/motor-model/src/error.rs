@@ -32,7 +32,7 @@ pub enum ModelError {
         reason: String,
     },
     /// A simulation would take more RK4 steps than its bound
-    /// ([`crate::MAX_RK4_STEPS_PER_SAMPLE`] a sample on average): a time constant
+    /// ([`crate::MAX_RK4_STEPS_PER_SAMPLE`] a sample on average, 1e9 at most): a time constant
     /// of the model (a brush drop's knee, a deep saturation) or an effect's step limit (a fast
     /// cogging) far below the sample period.
     TooStiff {
