@@ -38,7 +38,7 @@ use crate::error::{positive, ModelError};
 use crate::params::MotorParams;
 
 /// RK4 steps per fastest time constant of the plant (global error ≈ 1e-8 of the response).
-const STEPS_PER_TIME_CONSTANT: f64 = 40.0;
+pub(crate) const STEPS_PER_TIME_CONSTANT: f64 = 40.0;
 /// Bisection iterations locating a mode switch inside one step (2⁻⁴⁸ of the step).
 const EVENT_BISECTIONS: u32 = 48;
 /// Mode switches allowed inside one integration step before it is accepted as is (guards
@@ -737,7 +737,7 @@ fn axpy<const N: usize>(x: &State<N>, a: f64, y: &State<N>) -> State<N> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::effects::{BrushDrop, QuadraticDrag};
+    use crate::sim::effects::{BrushDrop, QuadraticDrag, ThermalDrift};
 
     fn paper_with(effect: Effect) -> Result<Trace, ModelError> {
         Simulator::new(
@@ -773,15 +773,39 @@ mod tests {
         .is_ok());
     }
 
-    /// A drag of 1e10 N·m·s²/rad² blows the explicit integration up: refused, where the run
-    /// used to return a trace of NaN.
+    /// A winding whose resistance grows by a factor of a million per kelvin heats without
+    /// bound: refused, where the run used to return a trace of NaN.
     #[test]
     fn a_run_whose_state_leaves_the_finite_numbers_is_refused() {
-        let err = paper_with(Effect::QuadraticDrag(QuadraticDrag {
-            c_nms2_per_rad2: 1e10,
+        let err = paper_with(Effect::ThermalDrift(ThermalDrift {
+            thermal_resistance_k_per_w: 1e6,
+            thermal_capacity_j_per_k: 1e-6,
+            alpha_per_k: 1e6,
         }))
         .expect_err("refused");
         assert!(matches!(err, ModelError::Diverged { .. }), "{err}");
+    }
+
+    /// A quadratic drag strong enough to make RK4 unstable at the plant's step (on the small
+    /// servo, `c = 3000` ran to −1e9 rad/s under +12 V, finite and exit 0): the drag's own
+    /// time constant bounds the step, and the speed stays where the drag holds it, between 0
+    /// and the speed at which `c Ω² = k I` at stall, `√(k E/(R c))`.
+    #[test]
+    fn a_strong_quadratic_drag_bounds_the_step_and_stays_stable() {
+        let servo = MotorParams::new(2.0, 0.002, 0.05, 0.0004, 2e-5, 0.004).unwrap();
+        let c = 3000.0;
+        let trace = Simulator::new(
+            servo,
+            Effects::none().with(Effect::QuadraticDrag(QuadraticDrag { c_nms2_per_rad2: c })),
+            Input::step(12.0, 0.0).unwrap(),
+        )
+        .unwrap()
+        .run(0.05, 5000.0)
+        .unwrap();
+        let ceiling = (0.05 * 12.0 / (2.0 * c)).sqrt();
+        for w in &trace.speed {
+            assert!((0.0..=ceiling).contains(w), "{w} outside [0, {ceiling}]");
+        }
     }
 
     /// The filter's output over one step by many small RK4 steps on the same cubic.
