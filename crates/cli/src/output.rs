@@ -1,4 +1,4 @@
-//! Where the CLI's results go. Every file a command writes goes through [`write`] or
+//! Where the CLI's results go. Every file a command writes goes through [`write_generated`] or
 //! [`write_with`], and every output path a command line names is checked by [`check`] before
 //! any work starts, so a bad `-o`, `--out` or `--plot` fails at once, not after a long fit.
 //!
@@ -129,11 +129,19 @@ pub fn create_dir(dir: &Path) -> Result<()> {
 const GENERATED_EXTENSIONS: [&str; 4] = ["svg", "png", "csv", "json"];
 
 /// Writes `bytes` to `path`, a name the command made up inside an output folder (a figure, a
-/// summary): only a regular file there is replaced (atomically, as [`write`] does) or a new
+/// summary): only a regular file there is replaced (atomically, as [`write_with`] does) or a new
 /// name taken. A symbolic link, FIFO, device or folder of that name is refused as bad input
 /// naming it: unlike a path given on the command line, nobody chose it as the target, and
 /// following it would replace another file or wait for a reader without end.
 pub fn write_generated(path: &Path, bytes: &[u8]) -> Result<()> {
+    write_generated_with(path, |out| Ok(out.write_all(bytes)?))
+}
+
+/// [`write_generated`] of what `body` produces, as [`write_with`] writes it.
+pub fn write_generated_with(
+    path: &Path,
+    body: impl FnOnce(&mut dyn Write) -> Result<()>,
+) -> Result<()> {
     match std::fs::symlink_metadata(path) {
         Ok(meta) if !meta.file_type().is_file() => Err(BadInput(format!(
             "cannot write {}: {}",
@@ -141,7 +149,22 @@ pub fn write_generated(path: &Path, bytes: &[u8]) -> Result<()> {
             not_regular(&meta)
         ))
         .into()),
-        _ => write(path, bytes),
+        _ => write_with(path, body),
+    }
+}
+
+/// Creates the folder `dir`, named by the command inside an output folder (a fleet's motor
+/// folder), unless something other than a folder — a symbolic link (to a folder elsewhere),
+/// a file — has that name: refused as bad input, as [`write_generated`] refuses a file's name.
+pub fn create_generated_dir(dir: &Path) -> Result<()> {
+    match std::fs::symlink_metadata(dir) {
+        Ok(meta) if !meta.file_type().is_dir() => Err(BadInput(format!(
+            "cannot write into {}: {}",
+            dir.display(),
+            not_regular(&meta)
+        ))
+        .into()),
+        _ => create_dir(dir),
     }
 }
 
@@ -172,11 +195,6 @@ fn blocked_entry(dir: &Path) -> Option<String> {
         (!meta.file_type().is_file())
             .then(|| format!("{} is in the way: {}", path.display(), not_regular(&meta)))
     })
-}
-
-/// Writes `bytes` to `path` as the module overview describes.
-pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_with(path, |out| Ok(out.write_all(bytes)?))
 }
 
 /// Writes what `body` produces to `path` as the module overview describes, buffered; `body`
@@ -571,7 +589,7 @@ mod tests {
         assert_eq!(std::fs::read_to_string(&file).unwrap(), "old");
         assert_eq!(std::fs::read_dir(dir).unwrap().count(), 1);
         assert!(!pending().iter().any(|p| p.starts_with(dir)));
-        write(&file, b"new").unwrap();
+        write_generated(&file, b"new").unwrap();
         assert_eq!(std::fs::read_to_string(&file).unwrap(), "new");
         assert_eq!(std::fs::read_dir(dir).unwrap().count(), 1);
     }

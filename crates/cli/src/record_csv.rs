@@ -1171,6 +1171,16 @@ pub fn write_file(path: &Path, record: &Record, metadata: &[(String, String)]) -
     crate::output::write_with(path, |mut out| write_to(&mut out, record, metadata))
 }
 
+/// [`write_file`] under a name the command made up inside an output folder: only a regular
+/// file of that name is replaced ([`crate::output::write_generated`]).
+pub fn write_generated_file(
+    path: &Path,
+    record: &Record,
+    metadata: &[(String, String)],
+) -> Result<()> {
+    crate::output::write_generated_with(path, |mut out| write_to(&mut out, record, metadata))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -513,3 +513,33 @@ fn a_fifo_nobody_opens_is_announced_not_silently_waited_on() {
         stderr(&from_file)
     );
 }
+
+/// `fleet --out DIR` names its motor folders and their records itself: a symbolic link in
+/// the way (to a user's file, or to a folder elsewhere) is refused (exit 2), its target left
+/// as it was, where the record used to replace the link's target.
+#[test]
+fn a_fleet_does_not_follow_links_in_the_names_it_makes() {
+    let dir = scratch("fleet_links");
+    let victim = dir.join("victim.csv");
+    std::fs::write(&victim, "keep me").unwrap();
+    let out = dir.join("fleet");
+    std::fs::create_dir_all(out.join("motor_001")).unwrap();
+    std::os::unix::fs::symlink(&victim, out.join("motor_001").join("high.csv")).unwrap();
+    let fleet = out.to_str().unwrap();
+    let run = common::motorid(&["fleet", "--out", fleet, "--motors", "2"]);
+    assert_eq!(run.status.code(), Some(2), "{}", common::stderr(&run));
+    assert!(
+        common::stderr(&run).contains("high.csv: it is a symbolic link, which is not replaced"),
+        "{}",
+        common::stderr(&run)
+    );
+    assert_eq!(std::fs::read_to_string(&victim).unwrap(), "keep me");
+    let elsewhere = dir.join("elsewhere");
+    std::fs::create_dir(&elsewhere).unwrap();
+    let linked = dir.join("linked");
+    std::fs::create_dir(&linked).unwrap();
+    std::os::unix::fs::symlink(&elsewhere, linked.join("motor_001")).unwrap();
+    let run = common::motorid(&["fleet", "--out", linked.to_str().unwrap(), "--motors", "2"]);
+    assert_eq!(run.status.code(), Some(2), "{}", common::stderr(&run));
+    assert_eq!(std::fs::read_dir(&elsewhere).unwrap().count(), 0);
+}

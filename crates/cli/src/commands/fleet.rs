@@ -12,7 +12,7 @@ use motor_model::{Derived, Effects, Input, MotorParams, NoiseRng};
 use crate::args::FleetArgs;
 use crate::output::{self, outln};
 use crate::progress::Jobs;
-use crate::record_csv::write_file;
+use crate::record_csv::write_generated_file;
 use crate::settings::Logger;
 use crate::simulated::{measured_step, metadata};
 use crate::{settings, BadInput};
@@ -113,7 +113,7 @@ pub fn run(a: &Settings) -> Result<()> {
         }
         let logger = Logger::paper(duration, rate);
         let dir = a.out.join(&name);
-        std::fs::create_dir_all(&dir)?;
+        output::create_generated_dir(&dir)?;
         output::write_generated(
             &dir.join("motor.json"),
             serde_json::to_string_pretty(&motor)?.as_bytes(),
@@ -133,7 +133,7 @@ pub fn run(a: &Settings) -> Result<()> {
             let mut meta = metadata(&motor, &Effects::none(), &Input::step(volts, at)?);
             meta[0].1 = "motorid fleet".into();
             meta.push(("measurement".into(), serde_json::to_string(&measurement)?));
-            write_file(&dir.join(name), &rec, &meta)?;
+            write_generated_file(&dir.join(name), &rec, &meta)?;
         }
         progress.done(m + 1, String::new);
     }
