@@ -114,7 +114,7 @@ pub(crate) fn check_aligned(label: &str, c: Channels<'_>) -> Result<(), FitError
 }
 
 /// The spread of `y`, max − min (its unit).
-pub(crate) fn span(y: &[f64]) -> f64 {
+fn span(y: &[f64]) -> f64 {
     y.iter().fold(f64::NEG_INFINITY, |m, &v| m.max(v))
         - y.iter().fold(f64::INFINITY, |m, &v| m.min(v))
 }

@@ -230,17 +230,6 @@ fn record_rows(
             expected: "a positive period",
         });
     }
-    // A drive's current moves at least by its noise or a step of its ADC: a constant one is
-    // no reading of it (fitted, J, f and Ts came out ±1e-14 with a "converged" fit).
-    if crate::checks::span(torque) <= 0.0 {
-        return Err(bad(
-            "torque",
-            format!(
-                "the torque (the current column times the torque constant) is constant ({}): is the current column right, and was the drive enabled?",
-                torque[0]
-            ),
-        ));
-    }
     let filter = Butterworth::low_pass(
         settings.position_filter_order,
         settings.position_cutoff_hz,

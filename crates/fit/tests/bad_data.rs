@@ -132,22 +132,3 @@ fn a_step_that_never_settles_is_refused_by_the_paper_method_only() {
     )
     .is_ok());
 }
-
-/// The inverse model of a current-driven axis refuses a torque that never changes (a current
-/// column that is no reading of the drive's current), where it fitted J, f and Ts of ±1e-14
-/// and called that converged.
-#[test]
-fn a_constant_torque_is_refused_by_the_inverse_model() {
-    let dt = 1e-3;
-    let position: Vec<f64> = (0..4000)
-        .map(|i| (i as f64 * dt * std::f64::consts::TAU).sin())
-        .collect();
-    let torque = vec![35.15; position.len()];
-    let err =
-        fit::identify_inverse_model(dt, &torque, &position, fit::InverseModelSettings::default())
-            .expect_err("refused");
-    assert!(
-        matches!(&err, FitError::BadData { reason, .. } if reason.contains("is constant (35.15)")),
-        "{err}"
-    );
-}
