@@ -142,14 +142,21 @@ pub fn write_generated_with(
     path: &Path,
     body: impl FnOnce(&mut dyn Write) -> Result<()>,
 ) -> Result<()> {
+    in_the_way(path, std::fs::FileType::is_file, "cannot write")?;
+    write_with(path, body)
+}
+
+/// Refuses `path`, a name the command made up, when something other than what `wanted` accepts
+/// (never a symbolic link: it is not followed) has that name; `doing` opens the message.
+fn in_the_way(path: &Path, wanted: fn(&std::fs::FileType) -> bool, doing: &str) -> Result<()> {
     match std::fs::symlink_metadata(path) {
-        Ok(meta) if !meta.file_type().is_file() => Err(BadInput(format!(
-            "cannot write {}: {}",
+        Ok(meta) if !wanted(&meta.file_type()) => Err(BadInput(format!(
+            "{doing} {}: {}",
             path.display(),
             not_regular(&meta)
         ))
         .into()),
-        _ => write_with(path, body),
+        _ => Ok(()),
     }
 }
 
@@ -157,15 +164,8 @@ pub fn write_generated_with(
 /// folder), unless something other than a folder — a symbolic link (to a folder elsewhere),
 /// a file — has that name: refused as bad input, as [`write_generated`] refuses a file's name.
 pub fn create_generated_dir(dir: &Path) -> Result<()> {
-    match std::fs::symlink_metadata(dir) {
-        Ok(meta) if !meta.file_type().is_dir() => Err(BadInput(format!(
-            "cannot write into {}: {}",
-            dir.display(),
-            not_regular(&meta)
-        ))
-        .into()),
-        _ => create_dir(dir),
-    }
+    in_the_way(dir, std::fs::FileType::is_dir, "cannot write into")?;
+    create_dir(dir)
 }
 
 /// Why an entry named by the command itself is not written: what it is, and what to do.

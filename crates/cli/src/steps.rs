@@ -224,12 +224,10 @@ pub fn load_step_pair(
     quiet: bool,
     assume_rest: bool,
 ) -> Result<StepPair> {
-    let (high_read, low_read) = std::thread::scope(|scope| {
-        let low = scope.spawn(|| read_loaded(low, map, true));
-        let high = read_loaded(high, map, true);
-        (high, low.join())
-    });
-    let low_read = low_read.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+    let (high_read, low_read) = rayon::join(
+        || read_loaded(high, map, true),
+        || read_loaded(low, map, true),
+    );
     let (high_read, low_read) = (high_read?, low_read?);
     if !assume_rest {
         let moving: Vec<String> = [(high, &high_read), (low, &low_read)]
@@ -252,12 +250,8 @@ pub fn load_step_pair(
             });
         }
     }
-    let (high_step, low_step) = std::thread::scope(|scope| {
-        let low_step = scope.spawn(|| judge_step(low, low_read));
-        let high_step = judge_step(high, high_read);
-        (high_step, low_step.join())
-    });
-    let low_step = low_step.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+    let (high_step, low_step) =
+        rayon::join(|| judge_step(high, high_read), || judge_step(low, low_read));
     let high_step = load_step_given(high_step, quiet)?;
     let low_step = load_step_given(low_step, quiet)?;
     Ok(StepPair::Steps(Box::new((high_step, low_step))))

@@ -738,10 +738,7 @@ pub fn run(a: &Settings) -> Result<()> {
     // not apply.
     if let Some(state) = a.initial_state.filter(|s| *s != fit::InitialState::Rest) {
         drop(phases);
-        let note = from_rest_note(&format!("--initial-state {}", state.name()));
-        if !a.quiet && !a.json {
-            crate::output::errln!("note: {note}");
-        }
+        let note = from_rest_note(a, &format!("--initial-state {}", state.name()));
         return run_output_error(a, &[high.clone(), low.clone()], Some(&note));
     }
     let assume_rest = a.initial_state == Some(fit::InitialState::Rest);
@@ -749,10 +746,7 @@ pub fn run(a: &Settings) -> Result<()> {
         StepPair::Steps(pair) => *pair,
         StepPair::Moving { records, why } => {
             drop(phases);
-            let note = from_rest_note(&why);
-            if !a.quiet && !a.json {
-                crate::output::errln!("note: {note}");
-            }
+            let note = from_rest_note(a, &why);
             let [h, l] = *records;
             return fit_output_error(a, &[high.clone(), low.clone()], vec![h, l], Some(&note));
         }
@@ -820,11 +814,16 @@ pub fn run(a: &Settings) -> Result<()> {
 
 /// The note of a step pair fitted whole by output error because the step methods, which start
 /// every step from rest, do not apply (`why`: `--initial-state steady|free`, or the records
-/// whose first samples show a running motor).
-fn from_rest_note(why: &str) -> String {
-    format!(
+/// whose first samples show a running motor), written to standard error unless `--quiet` or
+/// `--json`.
+fn from_rest_note(a: &Settings, why: &str) -> String {
+    let note = format!(
         "the step methods need records that start at rest ({why}): both records are fitted whole by output error"
-    )
+    );
+    if !a.quiet && !a.json {
+        crate::output::errln!("note: {note}");
+    }
+    note
 }
 
 /// `--record A.csv --record B.csv ...` (or a step pair that does not start at rest): all six
