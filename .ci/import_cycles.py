@@ -3,7 +3,7 @@
 
 Reads every `crates/*/src/**/*.rs`, takes each module (one file) and the modules its code
 names: `use crate::…`, `use super::…`, `use self::…` lines and `crate::…`/`super::…` paths in
-code (comments and strings skipped). A path is resolved to the deepest module file it
+code (comments, strings and `#[cfg(test)]` modules skipped: a test may reach anywhere). A path is resolved to the deepest module file it
 reaches; a name that module only re-exports (`pub use`) is followed to where it is defined,
 so a crate root's table of contents is not itself a dependency. Re-export lines are not
 edges. Prints every circle found (as `a -> b -> a`) and exits 1, or prints a summary and
@@ -55,6 +55,23 @@ def strip_comments_and_strings(src: str) -> str:
         else:
             out.append(c)
             i += 1
+    return "".join(out)
+
+
+def without_test_modules(text: str) -> str:
+    """`text` without its `#[cfg(test)] mod … { … }` blocks: tests may import anything."""
+    out, i = [], 0
+    for m in re.finditer(r"#\[cfg\(test\)\]\s*(?:pub(?:\([^)]*\))?\s+)?mod\s+\w+\s*\{", text):
+        if m.start() < i:
+            continue
+        out.append(text[i:m.start()])
+        depth, j = 1, m.end()
+        while j < len(text) and depth:
+            depth += text[j] == "{"
+            depth -= text[j] == "}"
+            j += 1
+        i = j
+    out.append(text[i:])
     return "".join(out)
 
 
@@ -142,7 +159,7 @@ def main() -> int:
     total_edges = 0
     for crate in sorted(p for p in crates_dir.iterdir() if (p / "src").is_dir()):
         mods = module_files(crate / "src")
-        texts = {m: strip_comments_and_strings(f.read_text()) for m, f in mods.items()}
+        texts = {m: without_test_modules(strip_comments_and_strings(f.read_text())) for m, f in mods.items()}
         # re-exports: (module, name) -> absolute path it stands for
         reexports: dict[tuple[tuple[str, ...], str], list[str]] = {}
         for m, text in texts.items():

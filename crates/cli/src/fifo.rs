@@ -48,7 +48,7 @@ pub fn open_read(path: &Path) -> std::io::Result<File> {
         // SAFETY: `poll` points at one valid pollfd whose descriptor `probe` keeps open.
         let ready = unsafe { libc::poll(&mut poll, 1, QUIET_WAIT_MS) } > 0;
         if !ready {
-            crate::output::errln!(
+            crate::console::errln!(
                 "{} is a FIFO: waiting for a program to write to it (Ctrl-C to stop)",
                 path.display()
             );
@@ -73,7 +73,7 @@ pub fn open_write(path: &Path) -> std::io::Result<File> {
             .custom_flags(libc::O_NONBLOCK)
             .open(path);
         match probe {
-            Err(e) if e.raw_os_error() == Some(libc::ENXIO) => crate::output::errln!(
+            Err(e) if e.raw_os_error() == Some(libc::ENXIO) => crate::console::errln!(
                 "{} is a FIFO: waiting for a program to read it (Ctrl-C to stop)",
                 path.display()
             ),

@@ -135,7 +135,7 @@ pub fn fit_figures(
             let paths = plot::time_series(&stem, &title, &t, &panels)?;
             if !quiet {
                 for p in &paths {
-                    crate::output::errln!("wrote {}", p.display());
+                    crate::console::errln!("wrote {}", p.display());
                 }
             }
             written.extend(paths);
@@ -218,7 +218,7 @@ pub fn residual_figures(
         )?;
         if !quiet {
             for p in &paths {
-                crate::output::errln!("wrote {}", p.display());
+                crate::console::errln!("wrote {}", p.display());
             }
         }
         written.extend(paths);

@@ -9,6 +9,8 @@
 
 mod args;
 mod commands;
+mod console;
+mod errors;
 mod fifo;
 mod figures;
 mod output;
@@ -25,6 +27,8 @@ use std::process::ExitCode;
 
 use clap::Parser;
 
+use crate::errors::BadInput;
+use crate::errors::NotConverged;
 use args::{Cli, Command};
 
 /// mimalloc rather than the system's malloc: it backs large blocks with transparent huge
@@ -41,30 +45,6 @@ const EXIT_BAD_INPUT: u8 = 2;
 const EXIT_FAILURE: u8 = 1;
 /// Exit code for a fit that ran but did not converge (its results are still printed).
 const EXIT_NOT_CONVERGED: u8 = 3;
-
-/// Marks a fit that did not converge, for the exit code.
-#[derive(Debug)]
-pub struct NotConverged(pub String);
-
-impl std::fmt::Display for NotConverged {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-impl std::error::Error for NotConverged {}
-
-/// Marks an error as the user's input to fix, for the exit code.
-#[derive(Debug)]
-pub struct BadInput(pub String);
-
-impl std::fmt::Display for BadInput {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-impl std::error::Error for BadInput {}
 
 /// Restores the default action of SIGPIPE (the Rust runtime ignores it), so that
 /// `motorid ... | head` ends quietly when the reader goes away, like other command-line tools,
@@ -143,7 +123,7 @@ fn main() -> ExitCode {
     match outcome {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            crate::output::errln!("error: {err:#}");
+            crate::console::errln!("error: {err:#}");
             if err.chain().any(|e| e.is::<BadInput>()) {
                 ExitCode::from(EXIT_BAD_INPUT)
             } else if err.chain().any(|e| e.is::<NotConverged>()) {

@@ -28,59 +28,10 @@ use std::sync::{Mutex, MutexGuard, PoisonError};
 
 use anyhow::{anyhow, Context, Result};
 
-use crate::BadInput;
+use crate::errors::BadInput;
 
 /// Symbolic links followed before giving up: Linux's own limit for one path (ELOOP).
 const MAX_LINKS: usize = 40;
-
-/// The context of every failed write to standard output.
-const STDOUT_FAILED: &str = "cannot write to standard output";
-
-/// Writes `args` and a newline to standard output and flushes it; a failure is an error
-/// (`cannot write to standard output: No space left on device (os error 28)`), not a panic.
-/// Called through [`outln!`].
-pub fn stdout_line(args: std::fmt::Arguments<'_>) -> Result<()> {
-    let mut out = std::io::stdout().lock();
-    out.write_fmt(format_args!("{args}\n"))
-        .and_then(|()| out.flush())
-        .context(STDOUT_FAILED)
-}
-
-/// `println!` that returns `anyhow::Result<()>` instead of panicking when standard output
-/// cannot be written: `outln!("{x} V")?;` ([`stdout_line`]).
-macro_rules! outln {
-    ($($arg:tt)*) => {
-        $crate::output::stdout_line(format_args!($($arg)*))
-    };
-}
-pub(crate) use outln;
-
-/// Writes `args` to standard error, ignoring a failure: a message that cannot be written
-/// (`2>/dev/full`, a closed descriptor) has nowhere else to go, and the exit code still says
-/// how the command ended. Called through [`errln!`] and [`errprint!`].
-pub fn stderr_text(args: std::fmt::Arguments<'_>) {
-    let mut err = std::io::stderr().lock();
-    let _ = err.write_fmt(args).and_then(|()| err.flush());
-}
-
-/// `eprintln!` that does not panic when standard error cannot be written ([`stderr_text`]).
-macro_rules! errln {
-    () => {
-        $crate::output::stderr_text(format_args!("\n"))
-    };
-    ($($arg:tt)*) => {
-        $crate::output::stderr_text(format_args!("{}\n", format_args!($($arg)*)))
-    };
-}
-pub(crate) use errln;
-
-/// `eprint!` that does not panic when standard error cannot be written ([`stderr_text`]).
-macro_rules! errprint {
-    ($($arg:tt)*) => {
-        $crate::output::stderr_text(format_args!($($arg)*))
-    };
-}
-pub(crate) use errprint;
 
 /// An output path named on the command line, for [`check`].
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -208,7 +159,7 @@ pub fn write_with(path: &Path, body: impl FnOnce(&mut dyn Write) -> Result<()>) 
             let mut out = BufWriter::new(std::io::stdout().lock());
             body(&mut out)
                 .and_then(|()| Ok(out.flush()?))
-                .context(STDOUT_FAILED)
+                .context(crate::console::STDOUT_FAILED)
         }
         Target::Direct(file) => {
             let file = crate::fifo::open_write(&file)

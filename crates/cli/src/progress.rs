@@ -53,7 +53,7 @@ impl Jobs {
             self.bar.set_message(detail());
             self.bar.set_position(done as u64);
         } else if done.is_multiple_of((self.total / 10).max(1)) || done == self.total {
-            crate::output::errln!(
+            crate::console::errln!(
                 "  {done}/{} {}{} ({:.1} s)",
                 self.total,
                 self.what,
@@ -159,14 +159,14 @@ fn report(
                 started.elapsed().as_secs_f64()
             );
             if terminal {
-                crate::output::errprint!("\r{line:<78}");
+                crate::console::errprint!("\r{line:<78}");
             } else {
-                crate::output::errln!("{line}");
+                crate::console::errln!("{line}");
             }
             shown = Some((s.0.clone(), Instant::now()));
         }
     }
     if terminal && shown.is_some() {
-        crate::output::errln!();
+        crate::console::errln!();
     }
 }

@@ -7,7 +7,10 @@ use std::path::Path;
 use anyhow::Result;
 use motor_model::Record;
 
-use crate::BadInput;
+use crate::errors::BadInput;
+
+/// The `measurement` metadata of a record simulated without ADC, noise or encoder.
+pub const IDEAL_MEASUREMENT: &str = "ideal (exact values)";
 
 /// Which header names hold the record's columns (`t`, `voltage`, `current`, `speed`,
 /// `position`), for files written by other tools: `--columns t=time_s,current=vir,...`.
@@ -671,7 +674,7 @@ fn parse_bytes(bytes: &[u8]) -> std::result::Result<Table, (usize, String)> {
 /// refused as "25 % of the current on an ADC rail".
 fn metadata_says_no_adc(table: &Table) -> bool {
     table.meta("measurement").is_some_and(|text| {
-        text == crate::simulated::IDEAL_MEASUREMENT
+        text == crate::record_csv::IDEAL_MEASUREMENT
             || serde_json::from_str::<motor_model::MeasurementModel>(text)
                 .is_ok_and(|m| m.adc.is_none())
     })

@@ -8,7 +8,7 @@ use motor_model::{
 };
 
 use crate::args::{InitialStateArg, MeasurementArgs, MethodArg, SpeedFromArg};
-use crate::BadInput;
+use crate::errors::BadInput;
 
 /// Longest settings file read (a motor, a start, a calibration): a few hundred bytes in use;
 /// beyond this the path names something else (`/dev/zero` would be read for ever).

@@ -4,9 +4,9 @@
 use anyhow::Result;
 use motor_model::{Adc, Effects, Input, MeasurementModel, MotorParams, Range, Record};
 
+use crate::errors::BadInput;
 use crate::settings::Logger;
 use crate::steps::{step_from_record_with, LoadedStep};
-use crate::BadInput;
 
 /// A step of `volts` at `at_s` \[s\] on `motor` recorded by `logger` with noise seed `seed`,
 /// with the measurement chain used.
@@ -132,9 +132,6 @@ pub fn record_at(
     step.inputs.current_lsb_a = lsb(1).unwrap_or(0.0);
     Ok(step)
 }
-
-/// The `measurement` metadata of a record simulated without ADC, noise or encoder.
-pub const IDEAL_MEASUREMENT: &str = "ideal (exact values)";
 
 /// Metadata lines describing a simulated record.
 pub fn metadata(motor: &MotorParams, effects: &Effects, input: &Input) -> Vec<(String, String)> {

@@ -16,8 +16,8 @@ use fit::{
 };
 use motor_model::{Effects, Input, MotorParams, Record};
 
+use crate::errors::{BadInput, NotConverged};
 use crate::record_csv::{read_loaded, ColumnMap, Loaded};
-use crate::{BadInput, NotConverged};
 
 /// The error of a fit of `label` as the exit code sees it: the optimiser failing (it found no
 /// usable minimum from the fit's own start) is a failed fit (exit 3), with the way to give a
@@ -134,7 +134,7 @@ const MIN_ZERO_RAIL_SAMPLES: usize = 20;
 fn warn(warnings: &[String], quiet: bool) {
     if !quiet {
         for w in warnings {
-            crate::output::errln!("{w}");
+            crate::console::errln!("{w}");
         }
     }
 }

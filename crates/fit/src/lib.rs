@@ -40,99 +40,86 @@
 //! ```
 #![warn(missing_docs)]
 
-mod checks;
-mod clipping;
+mod current_driven;
 pub mod diagnose;
 mod error;
-mod feedforward;
-mod full_model;
-mod initial_state;
-mod input_uncertainty;
-mod intervals;
-mod lm;
-mod mechanical;
-mod model33;
-mod output_error;
-mod paper_method;
-mod parameters;
-mod plausibility;
-mod record_kind;
-mod signal;
-mod start;
-mod stats;
-mod steady_fit;
-mod step_location;
+mod estimation;
+mod excitation;
+mod steps;
+mod voltage_speed;
 
-pub use checks::{
-    check_settled, check_settled_for, check_step_test, MIN_SAMPLES, SETTLED_FRACTION,
-};
-pub use clipping::{find_clipping, MIN_CLIPPED_RUN};
-pub use error::FitError;
-pub use feedforward::{
-    identify_feedforward, simulate_feedforward, simulate_voltage_speed, FeedforwardFit,
-    FeedforwardParams, FeedforwardSettings, MechanicalFromFeedforward, SpeedRecord, TauE,
-    VoltageSpeedModel, EXPLAINED_RATIO, FEEDFORWARD_NAMES, FEEDFORWARD_UNITS,
-};
-pub use full_model::{
-    identify_full, identify_full_with_inputs, noise_std, Channel, ChannelQuality, FittedChannel,
-    FullFit, StepTest, PARAM_NAMES, PARAM_UNITS,
-};
-pub use initial_state::{
-    detect_initial_state, detect_rest, DetectedInitialState, FittedInitialState, InitialState,
-    StartChannels,
-};
-pub use input_uncertainty::{
-    estimate_level, quantisation_bias_variance, LevelEstimate, LevelPrior, StepInputs, VoltageScale,
-};
-pub use intervals::MotorIntervals;
-pub use lm::{
-    accepted_steps, solve, LeastSquares, LevenbergMarquardt, LmReport, LmSettings, NormalEquations,
-    Termination,
-};
-pub use mechanical::{
+pub use current_driven::mechanical::{
     identify_inverse_model, identify_inverse_model_pooled, motor_torque, AxisRecord, FittedTorque,
     InverseModelSettings, MechanicalFit, OffsetStatus, MECHANICAL_NAMES, MECHANICAL_UNITS_LINEAR,
     MECHANICAL_UNITS_ROTARY,
 };
-pub use model33::{fit_33, Fit33, Params33, Record33};
-pub use output_error::{
+pub use error::FitError;
+pub use estimation::checks::{
+    check_settled, check_settled_for, check_step_test, MIN_SAMPLES, SETTLED_FRACTION,
+};
+pub use estimation::clipping::{find_clipping, MIN_CLIPPED_RUN};
+pub use estimation::fitted::FullFit;
+pub use estimation::intervals::MotorIntervals;
+pub use estimation::lm::{
+    accepted_steps, solve, LeastSquares, LevenbergMarquardt, LmReport, LmSettings, NormalEquations,
+    Termination,
+};
+pub use estimation::parameters::EffectEstimate;
+pub use estimation::records::ExcitedRecord;
+pub use estimation::records::{
+    noise_std, Channel, ChannelQuality, FittedChannel, StepTest, PARAM_NAMES, PARAM_UNITS,
+};
+pub use estimation::records::{FittedInitialState, InitialState};
+pub use estimation::refusal::Refusal;
+pub use estimation::signal::{decimate, Butterworth};
+pub use estimation::stats::{
+    equal_runs, newey_west_lags, newey_west_run_covariance, newey_west_score_covariance,
+    sandwich_uncertainty, student_t_quantile, uncertainty, NeweyWest, Uncertainty,
+};
+pub use excitation::equation_error::{
     electrical_equation, equation_error_start, equation_error_start_with_initial_states,
+};
+pub use excitation::initial_state::{
+    detect_initial_state, detect_rest, DetectedInitialState, StartChannels,
+};
+pub use excitation::input_uncertainty::{
+    estimate_level, quantisation_bias_variance, LevelEstimate, LevelPrior, StepInputs, VoltageScale,
+};
+pub use excitation::output_error::{
     identify_output_error, identify_output_error_with_effects,
     identify_output_error_with_friction_restarts, identify_output_error_with_initial_states,
     identify_output_error_with_inputs, identify_output_error_with_inputs_and_effects,
-    predict_output_error, voltage_input, voltage_levels, ExcitedRecord,
+    predict_output_error,
 };
-pub use paper_method::{
+pub use excitation::voltage::{voltage_input, voltage_levels};
+pub use steps::full_model::{identify_full, identify_full_with_inputs};
+pub use steps::model33::{fit_33, Fit33, Params33, Record33};
+pub use steps::paper_method::{
     from_high_voltage, identify_paper, speed_check_c8, suggested_low_voltage_45,
     tau_m_as_printed_37, with_low_voltage, HighVoltageResult, PaperIdentification, SpeedCheck,
     SteadyValues, TwoTestFriction, C8_MAX_RATIO,
 };
-pub use parameters::EffectEstimate;
-pub use plausibility::Refusal;
-pub use record_kind::{
+pub use steps::start::steady_state_start;
+pub use steps::steady_fit::{fit_apparent_resistance, SteadyFit};
+pub use steps::step_location::{locate_step, locate_step_with, StepLocation};
+pub use voltage_speed::feedforward::{
+    identify_feedforward, simulate_feedforward, simulate_voltage_speed, FeedforwardFit,
+    FeedforwardParams, FeedforwardSettings, MechanicalFromFeedforward, SpeedRecord, TauE,
+    VoltageSpeedModel, EXPLAINED_RATIO, FEEDFORWARD_NAMES, FEEDFORWARD_UNITS,
+};
+pub use voltage_speed::record_kind::{
     current_adc_steps, CurrentChannel, CurrentUnused, Drive, KindRefusal, KnownConstant,
     KnownConstants, MeasuredChannels, RecordKind, RecordSet, MIN_CURRENT_ADC_STEPS,
 };
-pub use signal::{decimate, Butterworth};
-pub use start::steady_state_start;
-pub use stats::{
-    equal_runs, newey_west_lags, newey_west_run_covariance, newey_west_score_covariance,
-    sandwich_uncertainty, student_t_quantile, uncertainty, NeweyWest, Uncertainty,
-};
-pub use steady_fit::{fit_apparent_resistance, SteadyFit};
-pub use step_location::{locate_step, locate_step_with, StepLocation};
 
-mod accuracy;
-mod pipeline;
-mod speed;
-
-pub use accuracy::{
+pub use estimation::accuracy::{
     accuracy, contains, median, relative_error, summarize, ParameterAccuracy, ParameterSummary,
 };
-pub use pipeline::{
-    identify_step_pair, judge_clipping, parameter_estimates, steady_value, torque_constant,
-    ClippingVerdict, PaperSkipped, ParameterEstimate, RecordChannel, StepMethod, StepPairError,
-    StepPairIdentification, StepRecord, StepRoute, TorqueConstantError, TorqueConstantSource,
-    WholeRecord, MAX_CLIPPED_FRACTION, MAX_CLIPPED_VOLTAGE, POORLY_DETERMINED, STEADY_TAIL_PARTS,
+pub use estimation::parameters::{parameter_estimates, ParameterEstimate};
+pub use estimation::speed::{encoder_speed, record_speed, ENCODER_SPEED_BASE_S};
+pub use steps::pipeline::{
+    identify_step_pair, judge_clipping, steady_value, torque_constant, ClippingVerdict,
+    PaperSkipped, RecordChannel, StepMethod, StepPairError, StepPairIdentification, StepRecord,
+    StepRoute, TorqueConstantError, TorqueConstantSource, WholeRecord, MAX_CLIPPED_FRACTION,
+    MAX_CLIPPED_VOLTAGE, POORLY_DETERMINED, STEADY_TAIL_PARTS,
 };
-pub use speed::{encoder_speed, record_speed, ENCODER_SPEED_BASE_S};

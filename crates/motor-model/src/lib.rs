@@ -37,6 +37,7 @@ mod measure;
 pub mod paper;
 mod params;
 mod real;
+mod rng;
 mod sim;
 mod steady;
 mod step;
@@ -50,20 +51,20 @@ pub use axis::{
 pub use derived::{Derived, Regime};
 pub use error::ModelError;
 pub use measure::{
-    central_difference, difference_over, mean_period, Adc, MeasurementModel, NoiseRng, Range,
-    Readings, Record, SpeedSource,
+    central_difference, difference_over, mean_period, Adc, MeasurementModel, Range, Readings,
+    Record, SpeedSource,
 };
 pub use params::MotorParams;
 pub use real::{Dual, Real};
+pub use rng::NoiseRng;
 pub use sim::effects::{
     BrushDrop, CoggingTorque, CurrentSensorLag, Domain, Effect, EffectKind, Effects,
     InductanceSaturation, ParamSpec, QuadraticDrag, StribeckFriction, ThermalDrift,
     COPPER_ALPHA_PER_K, EFFECT_NAMES,
 };
 pub use sim::input::Input;
-pub use sim::simulator::{
-    simulate, Simulator, Trace, MAX_RK4_STEPS_PER_SAMPLE, MAX_SAMPLES, MAX_STATES,
-};
+pub use sim::simulator::{simulate, Simulator, MAX_RK4_STEPS_PER_SAMPLE, MAX_STATES};
+pub use sim::trace::{Trace, MAX_SAMPLES};
 pub use steady::{
     breakaway_time, standstill_current, steady_state, ApparentResistance, SteadyState,
 };

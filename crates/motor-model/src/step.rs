@@ -25,7 +25,7 @@ use serde::Serialize;
 use crate::error::{non_negative, ModelError};
 use crate::params::MotorParams;
 use crate::real::Real;
-use crate::sim::simulator::{sample_grid, Trace};
+use crate::sim::trace::{sample_grid, Trace};
 use crate::steady::{breakaway_generic, steady_generic};
 
 /// Samples between exact re-evaluations of the grid recurrence (bounds rounding drift to

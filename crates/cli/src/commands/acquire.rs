@@ -6,8 +6,9 @@ use std::time::{Duration, Instant};
 use anyhow::Result;
 
 use crate::args::AcquireArgs;
+use crate::errors::BadInput;
 use crate::record_csv::write_file;
-use crate::{settings, BadInput};
+use crate::settings;
 use daq_protocol::host::{
     acquire, to_record, AcquireError, Calibration, Link, Phase, Stats, TestPlan,
 };
@@ -182,16 +183,16 @@ impl Progress {
             self.started.elapsed().as_secs_f64()
         );
         if self.terminal {
-            crate::output::errprint!("\r{line}   ");
+            crate::console::errprint!("\r{line}   ");
         } else {
-            crate::output::errln!("{line}");
+            crate::console::errln!("{line}");
         }
     }
 
     /// Ends a rewritten line.
     fn finish(&self) {
         if self.terminal {
-            crate::output::errln!();
+            crate::console::errln!();
         }
     }
 }
@@ -319,7 +320,7 @@ pub fn run(a: &Settings) -> Result<()> {
     ];
     write_file(&a.output, &record, &meta)?;
     let s = &acquired.stats;
-    crate::output::errln!(
+    crate::console::errln!(
         "wrote {} samples ({} s at {} Hz) to {}; {} bytes, {} frames, {} failed their check, {} lost, {} retries",
         record.t.len(),
         plan.duration_s,

@@ -12,7 +12,7 @@ use motor_model::{
 };
 
 use crate::args::DemoArgs;
-use crate::output::outln;
+use crate::console::outln;
 use crate::paper_values::{
     compare, HIGH_VOLTAGE_V, LOGGER_RATE_HZ, LOW_VOLTAGE_V, TABLE_1, TABLE_2, TEST_LENGTH_S,
 };

@@ -14,11 +14,11 @@ use motor_model::EffectKind;
 use serde_json::json;
 
 use crate::args::{AxisArg, DiagnoseArgs, DriveArg};
+use crate::console::outln;
+use crate::errors::{BadInput, NotConverged};
 use crate::figures::{FigureRecord, ResidualFigure};
-use crate::output::outln;
 use crate::record_csv::{read_loaded, ColumnMap};
 use crate::steps::{excited_from, identify_pair, in_order, load_excited, step_from, LoadedExcited};
-use crate::{BadInput, NotConverged};
 
 /// The command's settings, validated from its arguments ([`settings`]).
 pub struct Settings {
@@ -276,7 +276,7 @@ pub fn run(s: &Settings) -> Result<()> {
             let lv = step_from(low, lv, true)?;
             let (hv, lv, swapped) = in_order(hv, lv);
             if let Some(note) = swapped.filter(|_| !s.quiet) {
-                crate::output::errln!("note: {note}");
+                crate::console::errln!("note: {note}");
             }
             identify_pair(&hv, &lv, StepMethod::Paper)
                 .ok()
@@ -298,15 +298,15 @@ pub fn run(s: &Settings) -> Result<()> {
         }
         match p {
             DiagnoseProgress::Nominal => {
-                crate::output::errln!("diagnose: fitting the nominal model ({elapsed:.1} s)")
+                crate::console::errln!("diagnose: fitting the nominal model ({elapsed:.1} s)")
             }
             DiagnoseProgress::Screening { stage } => {
-                crate::output::errln!(
+                crate::console::errln!(
                     "diagnose: effect {stage}: screening the candidates ({elapsed:.1} s)"
                 )
             }
             DiagnoseProgress::Candidates { stage, done, total } if done > 0 => {
-                crate::output::errln!(
+                crate::console::errln!(
                     "diagnose: effect {stage}: {done}/{total} candidates refitted ({elapsed:.1} s)"
                 )
             }

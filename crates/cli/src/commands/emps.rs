@@ -18,10 +18,10 @@ use serde_json::json;
 use plotters::style::{BLACK, BLUE, RED};
 
 use crate::args::EmpsArgs;
-use crate::output::outln;
+use crate::console::outln;
+use crate::errors::BadInput;
 use crate::plot::{self, Panel, Series};
 use crate::record_csv::{read_table, Table};
-use crate::BadInput;
 
 /// Published IDIM-LS estimates the benchmark reports: M \[kg\], Fv \[N·s/m\], Fc \[N\] and
 /// the offset \[N\].

@@ -8,8 +8,9 @@ use daq_emu::host::{Emulator, LineFaults, Plant};
 use serialport::{SerialPort, TTYPort};
 
 use crate::args::EmulateArgs;
-use crate::output::outln;
-use crate::{settings, BadInput};
+use crate::console::outln;
+use crate::errors::BadInput;
+use crate::settings;
 
 /// `ber=RATE,drop=RATE,close=BYTES,seed=N`.
 fn faults(text: &str) -> Result<LineFaults> {
@@ -93,7 +94,7 @@ pub fn run(a: &Settings) -> Result<()> {
     // Flushed at once ([`outln!`]): a client reads the name before connecting.
     outln!("PTY {path}")?;
     if !a.quiet {
-        crate::output::errln!("emulated logger on {path} (115200 baud 8N1); Ctrl-C stops it");
+        crate::console::errln!("emulated logger on {path} (115200 baud 8N1); Ctrl-C stops it");
     }
     // The slave stays open here, so that the master keeps working between clients.
     let _slave = slave;
@@ -109,7 +110,7 @@ pub fn run(a: &Settings) -> Result<()> {
         let out = emulator.run(Duration::from_millis(20));
         if let Some(error) = emulator.take_error() {
             if !a.quiet {
-                crate::output::errln!("warning: the simulation refused the test: {error}");
+                crate::console::errln!("warning: the simulation refused the test: {error}");
             }
         }
         if !out.is_empty() {
@@ -120,7 +121,7 @@ pub fn run(a: &Settings) -> Result<()> {
         if emulator.line_closed() {
             // The `close` fault: the port goes away, as when a cable is pulled.
             if !a.quiet {
-                crate::output::errln!("the line is closed (--faults close): stopping");
+                crate::console::errln!("the line is closed (--faults close): stopping");
             }
             return Ok(());
         }

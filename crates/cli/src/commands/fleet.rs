@@ -10,12 +10,14 @@ use anyhow::Result;
 use motor_model::{Derived, Effects, Input, MotorParams, NoiseRng};
 
 use crate::args::FleetArgs;
-use crate::output::{self, outln};
+use crate::console::outln;
+use crate::errors::BadInput;
+use crate::output;
 use crate::progress::Jobs;
 use crate::record_csv::write_generated_file;
+use crate::settings;
 use crate::settings::Logger;
 use crate::simulated::{measured_step, metadata};
-use crate::{settings, BadInput};
 
 /// Samples aimed at per record.
 const SAMPLES: f64 = 2000.0;

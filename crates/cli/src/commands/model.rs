@@ -5,7 +5,7 @@ use motor_model::{Derived, MotorParams, Regime};
 use serde_json::json;
 
 use crate::args::ModelArgs;
-use crate::output::outln;
+use crate::console::outln;
 use crate::settings;
 
 /// The derived constants as a JSON object (keys KE, Ks, wn, zeta, sigma, wa, tau_m, tau_e,

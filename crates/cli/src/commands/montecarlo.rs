@@ -12,11 +12,11 @@ use motor_model::{MotorParams, NoiseRng};
 use serde_json::json;
 
 use crate::args::MontecarloArgs;
-use crate::output::outln;
+use crate::console::outln;
+use crate::errors::{BadInput, NotConverged};
 use crate::progress::Jobs;
 use crate::settings::{self, Logger};
 use crate::simulated::{record_at, StepTiming};
-use crate::{BadInput, NotConverged};
 
 /// Most record pairs a study may ask for (200 take about 10 s on 2 cores; a million, a day).
 const MAX_RUNS: usize = 1_000_000;

@@ -4,11 +4,11 @@ use anyhow::Result;
 use motor_model::{Effects, Input, MotorParams, Simulator, StepResponse, Trace};
 
 use crate::args::{SimulateArgs, SolverArg};
+use crate::errors::BadInput;
 use crate::progress::Phases;
 use crate::record_csv;
 use crate::settings;
 use crate::settings::MeasurementOptions;
-use crate::BadInput;
 
 /// The solver `--solver` asks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -137,7 +137,7 @@ pub fn run(a: &Settings) -> Result<()> {
     meta.push((
         "measurement".into(),
         if ideal {
-            crate::simulated::IDEAL_MEASUREMENT.into()
+            crate::record_csv::IDEAL_MEASUREMENT.into()
         } else {
             serde_json::to_string(&measurement).unwrap_or_default()
         },
@@ -169,7 +169,7 @@ pub fn run(a: &Settings) -> Result<()> {
             if a.quiet {
                 return Ok(());
             }
-            crate::output::errln!(
+            crate::console::errln!(
                 "wrote {} samples ({} s at {} Hz) to {}{}",
                 record.t.len(),
                 a.duration_s,

@@ -22,13 +22,18 @@ use motor_model::{Effects, Input, ModelError, MotorParams, Record, Trace, EFFECT
 use serde::Serialize;
 use std::borrow::Cow;
 
-use crate::diagnose::run::{
-    diagnose, fit_nominal, locate_every_jump, with_inputs, DiagnoseSettings, Diagnosis,
-};
-use crate::full_model::{Channel, FittedChannel};
-use crate::output_error::{
-    equation_error_start, predict_with_step_factor, voltage_input, ExcitedRecord,
-};
+use crate::diagnose::run::diagnose;
+
+use crate::diagnose::report::{DiagnoseSettings, Diagnosis};
+
+use crate::diagnose::nominal::fit_nominal;
+
+use crate::diagnose::jumps::{locate_every_jump, with_inputs};
+use crate::estimation::records::ExcitedRecord;
+use crate::estimation::records::{Channel, FittedChannel};
+use crate::excitation::equation_error::equation_error_start;
+use crate::excitation::output_error::predict_with_step_factor;
+use crate::excitation::voltage::voltage_input;
 
 /// One case diagnosed.
 #[derive(Debug, Clone, PartialEq, Serialize)]

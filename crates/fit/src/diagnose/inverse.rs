@@ -42,21 +42,23 @@ use serde::Serialize;
 
 use motor_model::{EffectKind, Effects};
 
-use crate::diagnose::localise::{
-    correlation_factor, localise_with_floors, Localisation, LocaliseSettings, ResidualChannel,
-    ResidualRecord,
+use crate::current_driven::mechanical::{
+    identify_inverse_model_pooled, regressor_rows, AxisRecord, InverseModelSettings, MechanicalFit,
+    OffsetStatus, Rows, MECHANICAL_NAMES, MECHANICAL_UNITS_LINEAR, MECHANICAL_UNITS_ROTARY,
 };
-use crate::diagnose::run::{Assessment, CandidateReport, DiagnoseError, EffectParam, ParamShift};
+use crate::diagnose::localise::floor::correlation_factor;
+use crate::diagnose::localise::{
+    localise_with_floors, Localisation, LocaliseSettings, ResidualChannel, ResidualRecord,
+};
+use crate::diagnose::report::{
+    Assessment, CandidateReport, DiagnoseError, EffectParam, ParamShift,
+};
 use crate::diagnose::screen::CORRELATION_LAGS;
 use crate::diagnose::verdict::{rank_candidates, CandidateScore, VerdictSettings};
 use crate::diagnose::Stage;
 use crate::error::FitError;
-use crate::full_model::{noise_std, Channel};
-use crate::mechanical::{
-    identify_inverse_model_pooled, regressor_rows, AxisRecord, InverseModelSettings, MechanicalFit,
-    OffsetStatus, Rows, MECHANICAL_NAMES, MECHANICAL_UNITS_LINEAR, MECHANICAL_UNITS_ROTARY,
-};
-use crate::stats::student_t_quantile;
+use crate::estimation::records::{noise_std, Channel};
+use crate::estimation::stats::student_t_quantile;
 
 /// Fractions of the largest |q̇| tried as the Stribeck speed `Ωs`.
 const STRIBECK_SPEED_FRACTIONS: [f64; 6] = [0.005, 0.01, 0.02, 0.05, 0.1, 0.2];

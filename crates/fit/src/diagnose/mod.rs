@@ -11,8 +11,12 @@
 //!   frequency and shaft angle, with the whiteness and input cross-correlation of MATLAB's
 //!   `resid`. Each part carries a test that separates a real gap from noise.
 //! - [`diagnose`] ([`run`]): the whole diagnosis — the nominal fit, the localisation, every
-//!   candidate screened, the best refitted with the motor on training data and judged on held-out data, stage
-//!   after stage.
+//!   candidate screened, the best refitted with the motor on training data and judged on
+//!   held-out data, stage after stage. What it is asked and answers is in [`report`]; its
+//!   parts, private to the crate: `nominal` (the nominal fit and its localisation), `heldout`
+//!   (the held-out blocks and the statistics judged on them), `jumps` (the voltage jumps'
+//!   instants), `starts` (where each candidate's refit starts), `stage` (one stage: screening,
+//!   refits, verdict) and `base` (the model a stage builds on).
 //! - [`screen`]: the score test of every candidate at the base model, which decides the few
 //!   that are refitted in full.
 //! - [`benchmark`]: the diagnosis scored on cases whose effect it is not told
@@ -28,23 +32,32 @@
 //! Like the rest of the crate it does no I/O: records come in as slices, results go out as
 //! values (serialisable with `serde`).
 
+mod base;
 pub mod benchmark;
+mod heldout;
 pub mod inverse;
+mod jumps;
 pub mod localise;
+mod nominal;
 pub mod propose;
+pub mod report;
 pub mod run;
 pub mod screen;
+mod stage;
+mod starts;
 pub mod verdict;
 
 pub use inverse::{
     diagnose_inverse, named_effects, AxisGeometry, InverseDiagnoseSettings, InverseDiagnosis,
     TorqueTrace,
 };
+pub use nominal::localise_fit;
 pub use propose::{separating_test, SeparatingTest};
-pub use run::{
-    diagnose, localise_fit, Assessment, CandidateReport, DiagnoseError, DiagnoseProgress,
-    DiagnoseSettings, Diagnosis, EffectParam, ParamShift, Stage,
+pub use report::{
+    Assessment, CandidateReport, DiagnoseError, DiagnoseProgress, DiagnoseSettings, Diagnosis,
+    EffectParam, ParamShift, Stage,
 };
+pub use run::diagnose;
 
 /// The name of each of `n` records in reports: `names[k]`, or `record k+1` (counted from 1)
 /// where `names` has none.

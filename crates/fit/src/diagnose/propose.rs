@@ -21,8 +21,8 @@ use motor_model::{Effects, Input, MotorParams, Simulator};
 use serde::Serialize;
 
 use crate::diagnose::localise::Localisation;
-use crate::diagnose::run::Diagnosis;
-use crate::full_model::Channel;
+use crate::diagnose::report::Diagnosis;
+use crate::estimation::records::Channel;
 
 /// Share of the longest duration's separation a shorter proposed record must reach.
 pub const SEPARATION_SHARE: f64 = 0.9;

@@ -29,8 +29,8 @@
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
-use crate::diagnose::localise::correlation_factor;
-use crate::stats::chi_square_sf;
+use crate::diagnose::localise::floor::correlation_factor;
+use crate::estimation::stats::chi_square_sf;
 
 /// Lags of the residual autocorrelation behind the correlation factor.
 pub(crate) const CORRELATION_LAGS: usize = 25;

@@ -29,7 +29,7 @@
 
 use serde::Serialize;
 
-use crate::stats::{chi_square_sf, f_sf};
+use crate::estimation::stats::{chi_square_sf, f_sf};
 
 /// One candidate's refit, as the ranking needs it.
 #[derive(Debug, Clone, Copy)]

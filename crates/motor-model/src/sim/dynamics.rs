@@ -16,6 +16,9 @@ use super::effects::{
 };
 use crate::params::MotorParams;
 
+/// RK4 steps per fastest time constant of the plant (global error ≈ 1e-8 of the response).
+pub(crate) const STEPS_PER_TIME_CONSTANT: f64 = 40.0;
+
 /// RK4 steps per cogging period at the speed bound (or the current speed) when no speed
 /// tolerance is given: the error on the speed ripple is then 2e-7 of the ripple.
 const STEPS_PER_COGGING_PERIOD: f64 = 40.0;
@@ -249,7 +252,7 @@ impl Dynamics for QuadraticDrag {
     fn step_limit(&self, p: &MotorParams, speed: f64, _tolerance: Option<f64>) -> f64 {
         let rate = 2.0 * self.c_nms2_per_rad2 * speed.abs() / p.j_kgm2;
         if rate.is_finite() && rate > 0.0 {
-            1.0 / (rate * super::simulator::STEPS_PER_TIME_CONSTANT)
+            1.0 / (rate * STEPS_PER_TIME_CONSTANT)
         } else {
             f64::INFINITY
         }

@@ -27,7 +27,7 @@
 use nalgebra::{Matrix4, Vector4};
 
 use super::input::Input;
-use super::simulator::Trace;
+use super::trace::Trace;
 use crate::derived::signed_damped_pulsation_sq;
 use crate::params::MotorParams;
 

@@ -107,7 +107,7 @@ impl Input {
                 expected: "at most 1,000,000 bits: lengthen the bit period",
             });
         }
-        let mut rng = crate::measure::NoiseRng::new(seed);
+        let mut rng = crate::rng::NoiseRng::new(seed);
         let steps: Vec<(f64, f64)> = (0..bits as usize)
             .map(|j| {
                 let sign = if rng.next_u64() >> 63 == 0 { 1.0 } else { -1.0 };

@@ -3,3 +3,4 @@ pub(crate) mod effects;
 pub(crate) mod exact;
 pub(crate) mod input;
 pub(crate) mod simulator;
+pub(crate) mod trace;

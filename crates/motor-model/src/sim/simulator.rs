@@ -27,8 +27,6 @@
 //! reverses) are located by bisection to 2⁻⁴⁸ of a step, so the stuck intervals are exact to
 //! far below the sample period.
 
-use serde::Serialize;
-
 use super::dynamics::Dynamics;
 use super::effects::{Effect, Effects};
 use super::exact::ExactPropagator;
@@ -36,16 +34,15 @@ use super::input::Input;
 use crate::derived::signed_damped_pulsation_sq;
 use crate::error::{positive, ModelError};
 use crate::params::MotorParams;
+use crate::sim::dynamics::STEPS_PER_TIME_CONSTANT;
+use crate::sim::trace::sample_grid;
+use crate::sim::trace::Trace;
 
-/// RK4 steps per fastest time constant of the plant (global error ≈ 1e-8 of the response).
-pub(crate) const STEPS_PER_TIME_CONSTANT: f64 = 40.0;
 /// Bisection iterations locating a mode switch inside one step (2⁻⁴⁸ of the step).
 const EVENT_BISECTIONS: u32 = 48;
 /// Mode switches allowed inside one integration step before it is accepted as is (guards
 /// against chattering at a threshold).
 const MAX_EVENTS_PER_STEP: u32 = 8;
-/// Longest record the simulator will produce, in samples (about 80 MB of output).
-pub const MAX_SAMPLES: usize = 10_000_000;
 /// Most RK4 steps a run may take per sample it produces, on average ([`Simulator::run`]): a
 /// time constant 2,500 times below the sample period (a 1 µs electrical one at 1 kHz takes
 /// 40,000 a sample, about 6 s a second of record).
@@ -70,41 +67,6 @@ type State<const N: usize> = [f64; N];
 enum Mode {
     Stuck,
     Moving(f64),
-}
-
-/// A simulated record at the plant (before the measurement model), SI units.
-#[derive(Debug, Clone, PartialEq, Default, Serialize)]
-pub struct Trace {
-    /// Sample times \[s\].
-    pub t: Vec<f64>,
-    /// Armature voltage E(t) applied \[V\].
-    pub voltage: Vec<f64>,
-    /// Current seen by the current sensor \[A\] (equals the armature current unless
-    /// `current_sensor_lag` is on).
-    pub current: Vec<f64>,
-    /// True armature current \[A\].
-    pub armature_current: Vec<f64>,
-    /// Speed Ω \[rad/s\].
-    pub speed: Vec<f64>,
-    /// Angle θ \[rad\].
-    pub position: Vec<f64>,
-    /// Whether the rotor was stuck (Coulomb friction holding it) at the sample.
-    pub stuck: Vec<bool>,
-}
-
-impl Trace {
-    /// An empty trace with room for `n` samples in every channel.
-    pub(crate) fn with_capacity(n: usize) -> Self {
-        Trace {
-            t: Vec::with_capacity(n),
-            voltage: Vec::with_capacity(n),
-            current: Vec::with_capacity(n),
-            armature_current: Vec::with_capacity(n),
-            speed: Vec::with_capacity(n),
-            position: Vec::with_capacity(n),
-            stuck: Vec::with_capacity(n),
-        }
-    }
 }
 
 /// An effect that is on, with the place of its own states in the state vector.
@@ -656,22 +618,6 @@ pub fn simulate(
         }
         _ => Simulator::new(*params, effects, input.clone())?.run(duration_s, rate_hz),
     }
-}
-
-/// Number of samples `⌊duration·rate⌋ + 1` (t = 0 to `duration_s` \[s\] included) and the
-/// sample period \[s\], refusing non-positive settings and records over [`MAX_SAMPLES`].
-pub(crate) fn sample_grid(duration_s: f64, rate_hz: f64) -> Result<(usize, f64), ModelError> {
-    let duration_s = positive("duration", duration_s)?;
-    let rate_hz = positive("sample rate", rate_hz)?;
-    let n_f = (duration_s * rate_hz).floor() + 1.0;
-    if n_f > MAX_SAMPLES as f64 {
-        return Err(ModelError::InvalidSetting {
-            name: "duration × rate".into(),
-            value: n_f,
-            expected: "at most 10,000,000 samples: shorten the record or lower the rate",
-        });
-    }
-    Ok((n_f as usize, 1.0 / rate_hz))
 }
 
 /// Terms of the series of [`sensor_filter_step`]'s integrals below `z = 1` (the last term

@@ -7,10 +7,11 @@ use super::forms::{withheld_effect_names, Form, PlantEffect};
 use super::plant::simulate_plant;
 use crate::derived::Derived;
 use crate::error::ModelError;
-use crate::measure::{NoiseRng, Record};
+use crate::measure::Record;
 use crate::params::MotorParams;
+use crate::rng::NoiseRng;
 use crate::sim::input::Input;
-use crate::sim::simulator::Trace;
+use crate::sim::trace::Trace;
 use crate::steady::steady_state;
 
 /// Copper's temperature coefficient at 20 °C \[1/K\] (IEC 60028), the thermal cases' α.

@@ -4,8 +4,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::ModelError;
-use crate::measure::{Adc, MeasurementModel, NoiseRng, Range, Record, SpeedSource};
-use crate::sim::simulator::Trace;
+use crate::measure::{Adc, MeasurementModel, Range, Record, SpeedSource};
+use crate::rng::NoiseRng;
+use crate::sim::trace::Trace;
 
 /// How the speed is sensed.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -9,7 +9,7 @@ use crate::derived::Derived;
 use crate::error::{positive, ModelError};
 use crate::params::MotorParams;
 use crate::sim::input::Input;
-use crate::sim::simulator::Trace;
+use crate::sim::trace::Trace;
 
 /// RK4 steps per time constant of the fastest mode (`h λmax = 1/8`: the per-step error of
 /// that mode is `(hλ)⁵/120 ≈ 3e-7` of its amplitude, and it dies out within a few steps; the

@@ -16,11 +16,14 @@ use fit::{
 use motor_model::MotorParams;
 use serde_json::{json, Value};
 
-use crate::output::{self, outln};
+use crate::output;
+
+use crate::console::outln;
+use crate::errors::{BadInput, NotConverged};
 use crate::progress::Jobs;
 use crate::record_csv::ColumnMap;
 use crate::steps::{fit_excited, identify_pair, in_order, load_excited, load_step, LoadedExcited};
-use crate::{parallel, settings, BadInput, NotConverged};
+use crate::{parallel, settings};
 
 use super::{ModelCheck, Settings};
 
@@ -289,7 +292,7 @@ pub fn run(a: &Settings, dir: &Path) -> Result<()> {
     let threads = parallel::threads(n);
     let started = std::time::Instant::now();
     if !a.quiet {
-        crate::output::errln!("identifying {n} motors on {threads} threads…");
+        crate::console::errln!("identifying {n} motors on {threads} threads…");
     }
     let progress = Jobs::new(n, "motors", a.quiet);
     let rows = parallel::map(

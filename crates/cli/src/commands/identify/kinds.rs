@@ -7,8 +7,8 @@ use fit::{
 };
 use serde_json::{json, Value};
 
-use crate::output::outln;
-use crate::{BadInput, NotConverged};
+use crate::console::outln;
+use crate::errors::{BadInput, NotConverged};
 
 use super::{channels_json, print_channels, sig, Settings};
 

@@ -17,8 +17,9 @@ use serde_json::{json, Value};
 use std::path::PathBuf;
 
 use crate::args::{AxisArg, DriveArg, IdentifyArgs};
+use crate::console::outln;
+use crate::errors::{BadInput, NotConverged};
 use crate::figures::FigureRecord;
-use crate::output::outln;
 use crate::progress::Phases;
 use crate::record_csv::{read_loaded, read_loaded_current_optional, ColumnMap, Loaded};
 use crate::settings;
@@ -26,7 +27,6 @@ use crate::steps::{
     common_channels, excited_from, file_lines, fit_excited_from, fit_voltage_speed, identify_pair,
     in_order, load_step_pair, measured_channels, LoadedExcited, LoadedStep, StepPair,
 };
-use crate::{BadInput, NotConverged};
 
 /// Where the records of an identification come from.
 #[derive(Debug, Clone)]
@@ -505,7 +505,7 @@ fn run_steady(a: &Settings, paths: &[PathBuf], r: f64, k: f64) -> Result<()> {
         )?;
         if !a.quiet {
             for p in paths {
-                crate::output::errln!("wrote {}", p.display());
+                crate::console::errln!("wrote {}", p.display());
             }
         }
     }
@@ -638,7 +638,7 @@ fn run_current(a: &Settings, paths: &[PathBuf]) -> Result<()> {
         )?;
         if !a.quiet {
             for p in written {
-                crate::output::errln!("wrote {}", p.display());
+                crate::console::errln!("wrote {}", p.display());
             }
         }
     }
@@ -761,10 +761,10 @@ pub fn run(a: &Settings) -> Result<()> {
     let (hv, lv, swapped) = in_order(hv, lv);
     if !a.quiet {
         if let Some(note) = swapped {
-            crate::output::errln!("note: {note}");
+            crate::console::errln!("note: {note}");
         }
         for s in [&hv, &lv].into_iter().filter(|s| s.mirrored) {
-            crate::output::errln!(
+            crate::console::errln!(
                 "note: {}: a negative step ({} V), fitted as its mirror image (the model is odd in E, I and the speed)",
                 s.label, -s.volts
             );
@@ -821,7 +821,7 @@ fn from_rest_note(a: &Settings, why: &str) -> String {
         "the step methods need records that start at rest ({why}): both records are fitted whole by output error"
     );
     if !a.quiet && !a.json {
-        crate::output::errln!("note: {note}");
+        crate::console::errln!("note: {note}");
     }
     note
 }
