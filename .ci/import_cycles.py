@@ -2,8 +2,8 @@
 """Fails when modules of a crate import each other in a circle.
 
 Reads every `crates/*/src/**/*.rs`, takes each module (one file) and the modules its code
-names: `use crate::…`, `use super::…`, `use self::…` lines and `crate::…`/`super::…` paths in
-code (comments, strings and `#[cfg(test)]` modules skipped: a test may reach anywhere). A path is resolved to the deepest module file it
+names: `use crate::…`, `use super::…`, `use self::…`, `use child::…` lines and
+`crate::…`/`super::…`/`self::…`/`child::…` paths in code (comments, strings and `#[cfg(test)]` modules skipped: a test may reach anywhere). A path is resolved to the deepest module file it
 reaches; a name that module only re-exports (`pub use`) is followed to where it is defined,
 so a crate root's table of contents is not itself a dependency. Re-export lines are not
 edges. Prints every circle found (as `a -> b -> a`) and exits 1, or prints a summary and
@@ -135,9 +135,11 @@ def expand(tree: str) -> list[list[str]]:
     return out
 
 
-def absolute(mod: tuple[str, ...], segs: list[str]) -> list[str] | None:
+def absolute(mod: tuple[str, ...], segs: list[str], mods=None) -> list[str] | None:
     if not segs:
         return None
+    if mods is not None and segs[0] not in ("crate", "self", "super") and mod + (segs[0],) in mods:
+        return list(mod) + segs  # a path through a child module: `child::item`
     segs = [s.split("as")[0] if False else s for s in segs]
     if segs[0] == "crate":
         return segs[1:]
@@ -198,12 +200,12 @@ def main() -> int:
             for reexport, segs in use_trees(text):
                 if reexport:
                     continue
-                ab = absolute(m, segs)
+                ab = absolute(m, segs, mods)
                 if ab is not None:
                     paths.append(ab)
             code = re.sub(r"(?:pub(?:\([^)]*\))?\s+)?use\s+[^;]*;", "", text)
-            for p in re.finditer(r"\b((?:crate|super|self)(?:::[A-Za-z_][A-Za-z0-9_]*)+)", code):
-                ab = absolute(m, p.group(1).split("::"))
+            for p in re.finditer(r"(?<![A-Za-z0-9_:])((?:[a-z_][a-z0-9_]*)(?:::[A-Za-z_][A-Za-z0-9_]*)+)", code):
+                ab = absolute(m, p.group(1).split("::"), mods)
                 if ab is not None:
                     paths.append(ab)
             for ab in paths:

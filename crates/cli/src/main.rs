@@ -10,6 +10,7 @@
 mod args;
 mod commands;
 mod console;
+mod csv_table;
 mod errors;
 mod fifo;
 mod figures;
@@ -18,6 +19,7 @@ mod paper_values;
 mod parallel;
 mod plot;
 mod progress;
+mod record_checks;
 mod record_csv;
 mod settings;
 mod simulated;

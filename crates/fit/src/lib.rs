@@ -102,15 +102,16 @@ pub use steps::paper_method::{
 pub use steps::start::steady_state_start;
 pub use steps::steady_fit::{fit_apparent_resistance, SteadyFit};
 pub use steps::step_location::{locate_step, locate_step_with, StepLocation};
-pub use voltage_speed::feedforward::{
-    identify_feedforward, simulate_feedforward, simulate_voltage_speed, FeedforwardFit,
-    FeedforwardParams, FeedforwardSettings, MechanicalFromFeedforward, SpeedRecord, TauE,
-    VoltageSpeedModel, EXPLAINED_RATIO, FEEDFORWARD_NAMES, FEEDFORWARD_UNITS,
+pub use voltage_speed::feedforward::{identify_feedforward, EXPLAINED_RATIO};
+pub use voltage_speed::model::{
+    FeedforwardFit, FeedforwardParams, FeedforwardSettings, MechanicalFromFeedforward, SpeedRecord,
+    TauE, VoltageSpeedModel, FEEDFORWARD_NAMES, FEEDFORWARD_UNITS,
 };
 pub use voltage_speed::record_kind::{
     current_adc_steps, CurrentChannel, CurrentUnused, Drive, KindRefusal, KnownConstant,
     KnownConstants, MeasuredChannels, RecordKind, RecordSet, MIN_CURRENT_ADC_STEPS,
 };
+pub use voltage_speed::simulation::{simulate_feedforward, simulate_voltage_speed};
 
 pub use estimation::accuracy::{
     accuracy, contains, median, relative_error, summarize, ParameterAccuracy, ParameterSummary,

@@ -14,8 +14,8 @@
 //!   [`Effects`] of the diagnosis (Stribeck friction, cogging, sensor lag, thermal drift,
 //!   quadratic drag, brush drop, inductance saturation).
 //! - [`MeasurementModel`]: ADC, noise and encoder, separate from the plant.
-//! - [`withheld`]: the data generator of the withheld-effect benchmark, with a plant of its
-//!   own and each effect in two functional forms.
+//! - `withheld` (with the feature `withheld`): the data generator of the withheld-effect
+//!   benchmark, with a plant of its own and each effect in two functional forms.
 //!
 //! ```
 //! use motor_model::{MotorParams, Derived, StepResponse};
@@ -41,6 +41,7 @@ mod rng;
 mod sim;
 mod steady;
 mod step;
+#[cfg(feature = "withheld")]
 pub mod withheld;
 
 pub use axis::{

@@ -4,14 +4,14 @@ use std::io::{IsTerminal, Read, Write};
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
+use daq_protocol::host::{
+    acquire, to_record, AcquireError, Calibration, Link, Phase, Stats, TestPlan,
+};
 
 use crate::args::AcquireArgs;
 use crate::errors::BadInput;
 use crate::record_csv::write_file;
 use crate::settings;
-use daq_protocol::host::{
-    acquire, to_record, AcquireError, Calibration, Link, Phase, Stats, TestPlan,
-};
 
 /// A serial port as a [`Link`].
 struct SerialLink(Box<dyn serialport::SerialPort>);

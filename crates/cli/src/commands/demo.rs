@@ -3,10 +3,9 @@
 use anyhow::Result;
 use fit::diagnose::{diagnose, DiagnoseSettings};
 use fit::{
-    accuracy, from_high_voltage, identify_full, identify_paper, FullFit, LmSettings,
-    PaperIdentification, Params33,
+    accuracy, equation_error_start, from_high_voltage, identify_full, identify_paper,
+    voltage_input, ExcitedRecord, FullFit, LmSettings, PaperIdentification, Params33,
 };
-use fit::{equation_error_start, voltage_input, ExcitedRecord};
 use motor_model::{
     Derived, Effect, Effects, Input, MeasurementModel, MotorParams, Simulator, StepResponse, Trace,
 };

@@ -13,15 +13,14 @@ use motor_model::{
     EMPS_DRIVE_GAIN_N_PER_V as DRIVE_GAIN_N_PER_V, EMPS_KP_PER_S, EMPS_KV_V_PER_M_S,
     EMPS_PULSE_COMMAND_V, EMPS_PULSE_FORCE_N,
 };
-use serde_json::json;
-
 use plotters::style::{BLACK, BLUE, RED};
+use serde_json::json;
 
 use crate::args::EmpsArgs;
 use crate::console::outln;
+use crate::csv_table::{read_table, Table};
 use crate::errors::BadInput;
 use crate::plot::{self, Panel, Series};
-use crate::record_csv::{read_table, Table};
 
 /// Published IDIM-LS estimates the benchmark reports: M \[kg\], Fv \[N·s/m\], Fc \[N\] and
 /// the offset \[N\].

@@ -12,12 +12,11 @@ use motor_model::{Derived, Effects, Input, MotorParams, NoiseRng};
 use crate::args::FleetArgs;
 use crate::console::outln;
 use crate::errors::BadInput;
-use crate::output;
 use crate::progress::Jobs;
 use crate::record_csv::write_generated_file;
-use crate::settings;
 use crate::settings::Logger;
 use crate::simulated::{measured_step, metadata};
+use crate::{output, settings};
 
 /// Samples aimed at per record.
 const SAMPLES: f64 = 2000.0;

@@ -6,9 +6,8 @@ use motor_model::{Effects, Input, MotorParams, Simulator, StepResponse, Trace};
 use crate::args::{SimulateArgs, SolverArg};
 use crate::errors::BadInput;
 use crate::progress::Phases;
-use crate::record_csv;
-use crate::settings;
 use crate::settings::MeasurementOptions;
+use crate::{record_csv, settings};
 
 /// The solver `--solver` asks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -137,7 +136,7 @@ pub fn run(a: &Settings) -> Result<()> {
     meta.push((
         "measurement".into(),
         if ideal {
-            crate::record_csv::IDEAL_MEASUREMENT.into()
+            crate::record_checks::IDEAL_MEASUREMENT.into()
         } else {
             serde_json::to_string(&measurement).unwrap_or_default()
         },

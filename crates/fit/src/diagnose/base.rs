@@ -1,9 +1,9 @@
 //! The base model a stage of the diagnosis builds on: the motor, the effects named so far and
 //! the training records' masks and inputs at its own jump instants.
 
-use crate::estimation::records::ExcitedRecord;
-use crate::estimation::records::FittedChannel;
 use motor_model::{Effects, MotorParams};
+
+use crate::estimation::records::{ExcitedRecord, FittedChannel};
 
 /// Everything one stage needs about the model it starts from.
 pub(crate) struct Base<'a> {

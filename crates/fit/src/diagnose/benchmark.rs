@@ -17,20 +17,17 @@
 //! of their held-out gap (the NRMSE above the noise floor) after/before, beside the median
 //! NRMSE after/before a perfect model would reach on the same samples ([`HeldoutShrink`]).
 
+use std::borrow::Cow;
+
 use motor_model::withheld::{benchmark_case_with_gap, generate, CaseRecords, CaseSpec, RecordRole};
 use motor_model::{Effects, Input, ModelError, MotorParams, Record, Trace, EFFECT_NAMES};
 use serde::Serialize;
-use std::borrow::Cow;
-
-use crate::diagnose::run::diagnose;
-
-use crate::diagnose::report::{DiagnoseSettings, Diagnosis};
-
-use crate::diagnose::nominal::fit_nominal;
 
 use crate::diagnose::jumps::{locate_every_jump, with_inputs};
-use crate::estimation::records::ExcitedRecord;
-use crate::estimation::records::{Channel, FittedChannel};
+use crate::diagnose::nominal::fit_nominal;
+use crate::diagnose::report::{DiagnoseSettings, Diagnosis};
+use crate::diagnose::run::diagnose;
+use crate::estimation::records::{Channel, ExcitedRecord, FittedChannel};
 use crate::excitation::equation_error::equation_error_start;
 use crate::excitation::output_error::predict_with_step_factor;
 use crate::excitation::voltage::voltage_input;

@@ -5,8 +5,7 @@
 use crate::diagnose::localise::floor::correlation_factor;
 use crate::diagnose::report::DiagnoseSettings;
 use crate::diagnose::screen::CORRELATION_LAGS;
-use crate::estimation::records::ExcitedRecord;
-use crate::estimation::records::{Channel, FittedChannel};
+use crate::estimation::records::{Channel, ExcitedRecord, FittedChannel};
 
 /// The records with the held-out blocks excluded (owned masks).
 pub(crate) struct Split {

@@ -2,15 +2,15 @@
 //! being judged (alternating with the nominal refit, or by a Gauss–Newton step of the motor and
 //! the instants together), and the records' inputs rebuilt at them.
 
+use motor_model::{Effects, Input, MotorParams};
+use nalgebra::DMatrix;
+
 use crate::diagnose::base::Base;
 use crate::diagnose::heldout::channel_sigma;
 use crate::diagnose::report::DiagnoseSettings;
 use crate::diagnose::screen::BaseProjection;
-use crate::estimation::records::Channel;
-use crate::estimation::records::ExcitedRecord;
+use crate::estimation::records::{Channel, ExcitedRecord};
 use crate::excitation::output_error::{output_error_sensitivity, predict_with_step_factor};
-use motor_model::{Effects, Input, MotorParams};
-use nalgebra::DMatrix;
 
 /// Earliest instant a record's first voltage jump is searched at \[sample periods\].
 pub(crate) const FIRST_JUMP_MARGIN: f64 = 0.02;

@@ -19,8 +19,8 @@
 //!   refits, verdict) and `base` (the model a stage builds on).
 //! - [`screen`]: the score test of every candidate at the base model, which decides the few
 //!   that are refitted in full.
-//! - [`benchmark`]: the diagnosis scored on cases whose effect it is not told
-//!   ([`motor_model::withheld`]).
+//! - `benchmark` (with the feature `benchmark`): the diagnosis scored on cases whose effect it
+//!   is not told (`motor_model::withheld`, with that crate's feature `withheld`).
 //! - [`inverse`]: the same for a current-driven axis, on the torque residual of the inverse
 //!   model (IDIM-LS), its candidates regressor columns refitted by least squares.
 //! - [`propose`]: for an ambiguous verdict, the step record (voltage, duration) whose
@@ -33,6 +33,7 @@
 //! values (serialisable with `serde`).
 
 mod base;
+#[cfg(feature = "benchmark")]
 pub mod benchmark;
 mod heldout;
 pub mod inverse;

@@ -3,6 +3,8 @@
 //! usable as a base (an electrical time constant the records can simulate, channels it
 //! explains).
 
+use motor_model::{EffectKind, Effects, MotorParams};
+
 use crate::diagnose::localise::{
     localise, Localisation, LocaliseSettings, ResidualChannel, ResidualRecord,
 };
@@ -11,10 +13,8 @@ use crate::diagnose::starts::integrated_angle;
 use crate::error::FitError;
 use crate::estimation::fitted::FullFit;
 use crate::estimation::parameters::EffectEstimate;
-use crate::estimation::records::ExcitedRecord;
-use crate::estimation::records::{Channel, FittedChannel, PARAM_NAMES};
+use crate::estimation::records::{Channel, ExcitedRecord, FittedChannel, PARAM_NAMES};
 use crate::excitation::output_error::fit_output_error;
-use motor_model::{EffectKind, Effects, MotorParams};
 
 /// Whether a converged fit refused for `refusal` still gives a model the diagnosis can judge
 /// by its prediction (`kind`: the effect refitted; `None` for the nominal fit): refused only

@@ -2,6 +2,9 @@
 //! candidate's report and assessment, the verdict's effects with their fitted parameters, the
 //! progress it reports and the errors that end it.
 
+use motor_model::{EffectKind, Effects, Input, MotorParams};
+use serde::Serialize;
+
 use crate::diagnose::localise::{Localisation, LocaliseSettings};
 use crate::diagnose::screen::Screening;
 use crate::diagnose::verdict::{Verdict, VerdictSettings};
@@ -9,8 +12,6 @@ use crate::error::FitError;
 use crate::estimation::fitted::FullFit;
 use crate::estimation::lm::LmSettings;
 use crate::estimation::records::FittedChannel;
-use motor_model::{EffectKind, Effects, Input, MotorParams};
-use serde::Serialize;
 
 /// Settings of [`diagnose`](crate::diagnose::diagnose).
 #[derive(Debug, Clone, PartialEq)]

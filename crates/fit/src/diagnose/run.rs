@@ -62,30 +62,19 @@
 use motor_model::{EffectKind, Effects, Input, MotorParams};
 
 use crate::diagnose::base::Base;
-use crate::diagnose::heldout::nrmse_summary;
-use crate::diagnose::heldout::split;
-use crate::diagnose::jumps::filled_from_grid;
-use crate::diagnose::jumps::jump_gauss_newton;
-use crate::diagnose::jumps::largest_jump_move;
-use crate::diagnose::jumps::locate_every_jump;
-use crate::diagnose::jumps::located_inputs;
-use crate::diagnose::jumps::with_inputs;
-use crate::diagnose::jumps::NOMINAL_LOCATE_ROUNDS;
-use crate::diagnose::jumps::NOMINAL_LOCATE_SETTLED;
-use crate::diagnose::nominal::fit_nominal;
-use crate::diagnose::nominal::localise_fit;
-use crate::diagnose::nominal::usable_nominal;
-use crate::diagnose::report::DiagnoseError;
-use crate::diagnose::report::DiagnoseProgress;
-use crate::diagnose::report::DiagnoseSettings;
-use crate::diagnose::report::Diagnosis;
-use crate::diagnose::report::Stage;
+use crate::diagnose::heldout::{nrmse_summary, split};
+use crate::diagnose::jumps::{
+    filled_from_grid, jump_gauss_newton, largest_jump_move, locate_every_jump, located_inputs,
+    with_inputs, NOMINAL_LOCATE_ROUNDS, NOMINAL_LOCATE_SETTLED,
+};
+use crate::diagnose::nominal::{fit_nominal, localise_fit, usable_nominal};
+use crate::diagnose::report::{
+    DiagnoseError, DiagnoseProgress, DiagnoseSettings, Diagnosis, Stage,
+};
 use crate::diagnose::stage::run_stage;
-use crate::diagnose::starts::channel_scales;
-use crate::diagnose::starts::slower_electrical;
+use crate::diagnose::starts::{channel_scales, slower_electrical};
 use crate::error::FitError;
-use crate::estimation::records::Channel;
-use crate::estimation::records::ExcitedRecord;
+use crate::estimation::records::{Channel, ExcitedRecord};
 use crate::excitation::output_error::predict_with_step_factor;
 
 /// Identifies the motor on `records`, localises its residual and looks for the unmodelled

@@ -1,50 +1,36 @@
 //! One stage of the diagnosis on top of a base model: every candidate screened, the best
 //! refitted from their starts, and the verdict's ranking of the refits on held-out data.
 
-use crate::diagnose::base::Base;
-use crate::diagnose::heldout::block_sse;
-use crate::diagnose::heldout::channel_nrmse;
-use crate::diagnose::heldout::nrmse_summary;
-use crate::diagnose::heldout::train_fall;
-use crate::diagnose::heldout::train_statistic;
-use crate::diagnose::jumps::located_inputs;
-use crate::diagnose::jumps::with_inputs;
-use crate::diagnose::jumps::with_jump_columns;
-use crate::diagnose::localise::Localisation;
-use crate::diagnose::nominal::determined;
-use crate::diagnose::nominal::diagnosable;
-use crate::diagnose::nominal::UNEXPLAINED_CHANNEL;
-use crate::diagnose::report::Assessment;
-use crate::diagnose::report::CandidateReport;
-use crate::diagnose::report::DiagnoseProgress;
-use crate::diagnose::report::DiagnoseSettings;
-use crate::diagnose::report::EffectParam;
-use crate::diagnose::report::ParamShift;
-use crate::diagnose::report::Stage;
-use crate::diagnose::screen::{BaseProjection, Screening};
-use crate::diagnose::starts::absorbed_start;
-use crate::diagnose::starts::candidate_start;
-use crate::diagnose::starts::candidate_starts;
-use crate::diagnose::starts::cogging_screened;
-use crate::diagnose::starts::shapes_searched;
-use crate::diagnose::starts::stribeck_within_records;
-use crate::diagnose::starts::weighted_difference;
-use crate::diagnose::starts::EFFECT_PART_MIN;
-use crate::diagnose::verdict::{rank_candidates, training_support, CandidateScore};
-use crate::error::{FitError, START_SERIES};
-use crate::estimation::fitted::FullFit;
-use crate::estimation::parameters::EffectEstimate;
-use crate::estimation::records::ExcitedRecord;
-use crate::estimation::records::{Channel, FittedChannel, PARAM_NAMES};
-use crate::excitation::output_error::{
-    fit_output_error, output_error_sensitivity, predict_with_step_factor,
-};
 use motor_model::{
     BrushDrop, CoggingTorque, Effect, EffectKind, Effects, MotorParams, QuadraticDrag,
     StribeckFriction,
 };
 use nalgebra::DMatrix;
 use rayon::prelude::*;
+
+use crate::diagnose::base::Base;
+use crate::diagnose::heldout::{
+    block_sse, channel_nrmse, nrmse_summary, train_fall, train_statistic,
+};
+use crate::diagnose::jumps::{located_inputs, with_inputs, with_jump_columns};
+use crate::diagnose::localise::Localisation;
+use crate::diagnose::nominal::{determined, diagnosable, UNEXPLAINED_CHANNEL};
+use crate::diagnose::report::{
+    Assessment, CandidateReport, DiagnoseProgress, DiagnoseSettings, EffectParam, ParamShift, Stage,
+};
+use crate::diagnose::screen::{BaseProjection, Screening};
+use crate::diagnose::starts::{
+    absorbed_start, candidate_start, candidate_starts, cogging_screened, shapes_searched,
+    stribeck_within_records, weighted_difference, EFFECT_PART_MIN,
+};
+use crate::diagnose::verdict::{rank_candidates, training_support, CandidateScore};
+use crate::error::{FitError, START_SERIES};
+use crate::estimation::fitted::FullFit;
+use crate::estimation::parameters::EffectEstimate;
+use crate::estimation::records::{Channel, ExcitedRecord, FittedChannel, PARAM_NAMES};
+use crate::excitation::output_error::{
+    fit_output_error, output_error_sensitivity, predict_with_step_factor,
+};
 
 /// A candidate's report, its held-out block errors and its training likelihood-ratio
 /// statistic (empty and `None` when it was not refitted, or its refit failed).

@@ -3,6 +3,13 @@
 //! from their peaks), the cogging prefilter, and the starts that split an effect from the motor
 //! parameter the nominal fit absorbed it into.
 
+use motor_model::{
+    BrushDrop, CoggingTorque, CurrentSensorLag, Effect, EffectKind, InductanceSaturation,
+    MotorParams, QuadraticDrag, StribeckFriction, ThermalDrift, COPPER_ALPHA_PER_K,
+};
+use nalgebra::DMatrix;
+use rayon::prelude::*;
+
 use crate::diagnose::base::Base;
 use crate::diagnose::heldout::channel_sigma;
 use crate::diagnose::jumps::record_rows;
@@ -10,14 +17,7 @@ use crate::diagnose::localise::{Localisation, LocaliseSettings};
 use crate::diagnose::report::DiagnoseSettings;
 use crate::diagnose::screen::BaseProjection;
 use crate::estimation::fitted::FullFit;
-use crate::estimation::records::ExcitedRecord;
-use crate::estimation::records::{Channel, FittedChannel};
-use motor_model::{
-    BrushDrop, CoggingTorque, CurrentSensorLag, Effect, EffectKind, InductanceSaturation,
-    MotorParams, QuadraticDrag, StribeckFriction, ThermalDrift, COPPER_ALPHA_PER_K,
-};
-use nalgebra::DMatrix;
-use rayon::prelude::*;
+use crate::estimation::records::{Channel, ExcitedRecord, FittedChannel};
 
 /// Cogging period counts screened with their full signature at most, beside the angle
 /// search's: the best by [`cogging_prefilter`].

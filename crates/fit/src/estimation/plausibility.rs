@@ -8,7 +8,6 @@
 use motor_model::{Domain, MotorParams};
 
 use crate::estimation::fitted::FullFit;
-
 use crate::estimation::intervals::MotorIntervals;
 use crate::estimation::parameters::EffectEstimate;
 use crate::estimation::records::{Channel, ChannelQuality};

@@ -1,8 +1,9 @@
 //! Why a fit whose solver converged is still not a result ([`Refusal`]); the rules that
 //! decide it are in [`crate::estimation::plausibility`].
 
-use crate::estimation::records::Channel;
 use std::fmt;
+
+use crate::estimation::records::Channel;
 
 /// Why a converged fit is still not a result.
 #[derive(Debug, Clone, PartialEq)]

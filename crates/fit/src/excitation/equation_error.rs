@@ -1,18 +1,17 @@
 //! The equation-error start of an output-error fit: R and L from the electrical equation,
 //! J, f and Ts from the torque equation (the inverse model), on low-passed, decimated records.
 
+use motor_model::{central_difference, Effects, MotorParams};
+
 use crate::current_driven::mechanical::{
     identify_inverse_model_pooled, motor_torque, AxisRecord, InverseModelSettings,
 };
 use crate::error::FitError;
 use crate::estimation::lm::LeastSquares;
-use crate::estimation::records::ExcitedRecord;
-use crate::estimation::records::InitialState;
+use crate::estimation::records::{ExcitedRecord, InitialState};
 use crate::estimation::signal::Butterworth;
-use crate::excitation::oe_problem::check_record;
-use crate::excitation::oe_problem::OeProblem;
+use crate::excitation::oe_problem::{check_record, OeProblem};
 use crate::excitation::voltage::bad;
-use motor_model::{central_difference, Effects, MotorParams};
 
 /// Samples per row of the equation-error start's torque equation (2b), at most \[-\].
 pub(crate) const START_DECIMATION: usize = 5;

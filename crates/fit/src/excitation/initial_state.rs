@@ -11,9 +11,7 @@
 use motor_model::{central_difference, Input};
 
 use crate::error::FitError;
-use crate::estimation::records::noise_std;
-use crate::estimation::records::ExcitedRecord;
-use crate::estimation::records::InitialState;
+use crate::estimation::records::{noise_std, ExcitedRecord, InitialState};
 
 /// The initial state a record shows, and why.
 #[derive(Debug, Clone, PartialEq)]

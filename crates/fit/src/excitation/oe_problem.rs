@@ -2,13 +2,20 @@
 //! stick-slip simulator, each channel weighted by its noise, the motor's parameters, the fitted
 //! effects' and the records' initial states and current offsets as unknowns.
 
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use motor_model::{central_difference, steady_state, Effects, Input, MotorParams, Simulator};
+use nalgebra::DMatrix;
+use rayon::prelude::*;
+
 use crate::error::FitError;
 use crate::estimation::lm::{half_squared_norm, LeastSquares, NormalEquations};
 use crate::estimation::parameters::Parameters;
 use crate::estimation::plausibility::RecordFacts;
-use crate::estimation::records::ExcitedRecord;
-use crate::estimation::records::{noise_floor, noise_std, Channel, ChannelQuality, FittedChannel};
-use crate::estimation::records::{FittedInitialState, InitialState};
+use crate::estimation::records::{
+    noise_floor, noise_std, Channel, ChannelQuality, ExcitedRecord, FittedChannel,
+    FittedInitialState, InitialState,
+};
 use crate::estimation::stats::{
     equal_runs, newey_west_lags, newey_west_run_covariance, scaled_inverse, SeriesLayout,
 };
@@ -18,10 +25,6 @@ use crate::excitation::input_uncertainty::{
     pooled_level_variance, settled_current, LevelPrior, Nuisance, NuisanceProblem,
 };
 use crate::excitation::voltage::bad;
-use motor_model::{central_difference, steady_state, Effects, Input, MotorParams, Simulator};
-use nalgebra::DMatrix;
-use rayon::prelude::*;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Step of the forward-difference Jacobian in `θ = ln p` (relative step of each parameter).
 pub(crate) const FD_STEP: f64 = 1e-6;

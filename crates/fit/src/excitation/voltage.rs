@@ -1,15 +1,15 @@
 //! The voltage waveform a measured column describes: its levels and jumps where it is
 //! piecewise constant (a step, staircase, PRBS), the samples themselves otherwise.
 
+use motor_model::Input;
+
 use crate::error::FitError;
-use crate::estimation::records::uniform_period;
 use crate::estimation::records::{
-    noise_of_second_differences, noise_std, squared_second_difference,
+    noise_of_second_differences, noise_std, squared_second_difference, uniform_period,
 };
 use crate::excitation::input_uncertainty::{
     estimate_level, LevelEstimate, LevelPrior, VoltageScale,
 };
-use motor_model::Input;
 
 /// A voltage is piecewise constant when it has at most one jump per this many samples.
 pub(crate) const MIN_SAMPLES_PER_LEVEL: usize = 20;

@@ -16,15 +16,11 @@ use crate::estimation::fitted::FullFit;
 use crate::estimation::lm::{LeastSquares, LmSettings, NormalEquations};
 use crate::estimation::parameters::{Parameters, MOTOR};
 use crate::estimation::plausibility::RecordFacts;
-use crate::estimation::records::noise_floor;
-use crate::estimation::records::noise_std;
-use crate::estimation::records::Channel;
-use crate::estimation::records::ChannelQuality;
-use crate::estimation::records::FittedChannel;
-use crate::estimation::records::StepTest;
+use crate::estimation::records::{
+    noise_floor, noise_std, Channel, ChannelQuality, FittedChannel, StepTest,
+};
 use crate::estimation::stats::{newey_west_lags, scaled_inverse, NeweyWest, SeriesLayout};
-use crate::estimation::weighted::quality_from_sums;
-use crate::estimation::weighted::WeightedProblem;
+use crate::estimation::weighted::{quality_from_sums, WeightedProblem};
 use crate::excitation::input_uncertainty::{
     bias_group_sizes, fit_with_inputs, grid_phase_score_covariance, noise_free_quantum,
     pooled_level_variance, settled_current, Nuisance, NuisanceProblem, StepInputs,

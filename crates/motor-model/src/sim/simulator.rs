@@ -35,8 +35,7 @@ use crate::derived::signed_damped_pulsation_sq;
 use crate::error::{positive, ModelError};
 use crate::params::MotorParams;
 use crate::sim::dynamics::STEPS_PER_TIME_CONSTANT;
-use crate::sim::trace::sample_grid;
-use crate::sim::trace::Trace;
+use crate::sim::trace::{sample_grid, Trace};
 
 /// Bisection iterations locating a mode switch inside one step (2⁻⁴⁸ of the step).
 const EVENT_BISECTIONS: u32 = 48;

@@ -16,16 +16,14 @@ use fit::{
 use motor_model::MotorParams;
 use serde_json::{json, Value};
 
-use crate::output;
-
+use super::model_check::ModelCheck;
+use super::options::Settings;
 use crate::console::outln;
 use crate::errors::{BadInput, NotConverged};
 use crate::progress::Jobs;
 use crate::record_csv::ColumnMap;
 use crate::steps::{fit_excited, identify_pair, in_order, load_excited, load_step, LoadedExcited};
-use crate::{parallel, settings};
-
-use super::{ModelCheck, Settings};
+use crate::{output, parallel, settings};
 
 /// Outcome of one folder.
 enum Outcome {

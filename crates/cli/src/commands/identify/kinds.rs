@@ -2,15 +2,13 @@
 //! [`fit::RecordKind`]) and the voltage-and-speed report (kS, kV, kA; J, f, Ts with R and k).
 
 use anyhow::Result;
-use fit::{
-    CurrentUnused, FeedforwardFit, KindRefusal, KnownConstant, KnownConstants, RecordKind, TauE,
-};
+use fit::{CurrentUnused, FeedforwardFit, KindRefusal, KnownConstant, RecordKind, TauE};
 use serde_json::{json, Value};
 
+use super::options::Settings;
+use super::report::{channels_json, print_channels, sig};
 use crate::console::outln;
 use crate::errors::{BadInput, NotConverged};
-
-use super::{channels_json, print_channels, sig, Settings};
 
 /// The option that gives a known constant.
 fn option(c: KnownConstant) -> &'static str {
@@ -70,26 +68,6 @@ pub fn kind_json(kind: &RecordKind) -> Value {
             _ => None,
         },
         "text": kind_line(kind),
-    })
-}
-
-/// The known constants given, `resistance` \[Ω\] and `torque_constant` \[N·m/A\], checked
-/// positive and finite.
-pub fn known_constants(
-    resistance: Option<f64>,
-    torque_constant: Option<f64>,
-) -> Result<KnownConstants> {
-    for (name, value) in [
-        ("--resistance", resistance),
-        ("--torque-constant", torque_constant),
-    ] {
-        if let Some(v) = value.filter(|v| !(v.is_finite() && *v > 0.0)) {
-            return Err(BadInput(format!("{name} {v}: expected a positive number")).into());
-        }
-    }
-    Ok(KnownConstants {
-        resistance: resistance.is_some(),
-        torque_constant: torque_constant.is_some(),
     })
 }
 

@@ -1,38 +1,21 @@
 //! One channel localised: its excess by phase, window, operating band and trend, its spectrum,
 //! its ripple over shaft angle, its whiteness and its cross-correlation with the input.
 
-use crate::diagnose::localise::floor::autocorrelation;
-use crate::diagnose::localise::floor::excess_test;
-use crate::diagnose::localise::floor::factor_of;
-use crate::diagnose::localise::floor::floor_model;
-use crate::diagnose::localise::floor::given_floor_model;
-use crate::diagnose::localise::floor::FloorModel;
-use crate::diagnose::localise::floor::Prefix;
-use crate::diagnose::localise::floor::MIN_RIPPLE_REVOLUTIONS;
-use crate::diagnose::localise::floor::MIN_RIPPLE_SAMPLES;
-use crate::diagnose::localise::floor::NEAR_ZERO_FRACTION;
-use crate::diagnose::localise::floor::RIPPLE_NYQUIST;
-use crate::diagnose::localise::floor::Z_99;
-use crate::diagnose::localise::types::AngleRipple;
-use crate::diagnose::localise::types::Band;
-use crate::diagnose::localise::types::Bands;
-use crate::diagnose::localise::types::ChannelLocalisation;
-use crate::diagnose::localise::types::CrossCorrelation;
-use crate::diagnose::localise::types::LocaliseSettings;
-use crate::diagnose::localise::types::Phase;
-use crate::diagnose::localise::types::PhaseExcess;
-use crate::diagnose::localise::types::ResidualChannel;
-use crate::diagnose::localise::types::ResidualRecord;
-use crate::diagnose::localise::types::SpectralPeak;
-use crate::diagnose::localise::types::Spectrum;
-use crate::diagnose::localise::types::Trend;
-use crate::diagnose::localise::types::Whiteness;
-use crate::diagnose::localise::types::WindowExcess;
-use crate::estimation::records::Channel;
-use crate::estimation::stats::{chi_square_sf, f_sf, normal_sf, NeweyWest};
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 use rustfft::num_complex::Complex;
 use rustfft::FftPlanner;
+
+use crate::diagnose::localise::floor::{
+    autocorrelation, excess_test, factor_of, floor_model, given_floor_model, FloorModel, Prefix,
+    MIN_RIPPLE_REVOLUTIONS, MIN_RIPPLE_SAMPLES, NEAR_ZERO_FRACTION, RIPPLE_NYQUIST, Z_99,
+};
+use crate::diagnose::localise::types::{
+    AngleRipple, Band, Bands, ChannelLocalisation, CrossCorrelation, LocaliseSettings, Phase,
+    PhaseExcess, ResidualChannel, ResidualRecord, SpectralPeak, Spectrum, Trend, Whiteness,
+    WindowExcess,
+};
+use crate::estimation::records::Channel;
+use crate::estimation::stats::{chi_square_sf, f_sf, normal_sf, NeweyWest};
 
 pub(crate) fn localise_channel(
     rec: &ResidualRecord,

@@ -1,11 +1,9 @@
 //! A localisation read as findings: each significant excess, in words, ranked.
 
-use crate::diagnose::localise::types::channel_key;
-use crate::diagnose::localise::types::ChannelLocalisation;
-use crate::diagnose::localise::types::Localisation;
-use crate::diagnose::localise::types::PhaseKind;
-use crate::estimation::records::Channel;
 use serde::Serialize;
+
+use crate::diagnose::localise::types::{channel_key, ChannelLocalisation, Localisation, PhaseKind};
+use crate::estimation::records::Channel;
 
 /// What a significant finding is about.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]

@@ -1,12 +1,9 @@
 //! The noise floor model of a channel (quantum, steady-state scatter, rails, the encoder's
 //! code pattern), the residual's correlation factor and the excess test against the floor.
 
-use crate::diagnose::localise::types::ExcessTest;
-use crate::diagnose::localise::types::FloorSource;
-use crate::diagnose::localise::types::NoiseFloor;
-use crate::diagnose::localise::types::ResidualChannel;
-use crate::diagnose::localise::types::ResidualRecord;
-use crate::diagnose::localise::types::PRECISION_FLOOR;
+use crate::diagnose::localise::types::{
+    ExcessTest, FloorSource, NoiseFloor, ResidualChannel, ResidualRecord, PRECISION_FLOOR,
+};
 use crate::estimation::records::{noise_std, second_difference, Channel};
 use crate::estimation::stats::chi_square_sf;
 use crate::excitation::input_uncertainty::detect_quantum;

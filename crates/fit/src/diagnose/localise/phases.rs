@@ -1,20 +1,15 @@
 //! The phases of a record (rest, transients, steady runs, stops) from its voltage and speed.
 
-use crate::diagnose::localise::channel::mean_of;
-use crate::diagnose::localise::channel::smooth;
-use crate::diagnose::localise::floor::PEAK_FRACTION;
-use crate::diagnose::localise::floor::PEAK_LEVEL;
-use crate::diagnose::localise::floor::PHASE_SMOOTHING;
-use crate::diagnose::localise::floor::SETTLED_FRACTION;
-use crate::diagnose::localise::floor::STOPPED_FRACTION;
-use crate::diagnose::localise::floor::UNSETTLED_FRACTION;
-use crate::diagnose::localise::floor::VOLTAGE_OFF_FRACTION;
-use crate::diagnose::localise::types::Phase;
-use crate::diagnose::localise::types::PhaseKind;
-use crate::diagnose::localise::types::ResidualRecord;
+use motor_model::Input;
+
+use crate::diagnose::localise::channel::{mean_of, smooth};
+use crate::diagnose::localise::floor::{
+    PEAK_FRACTION, PEAK_LEVEL, PHASE_SMOOTHING, SETTLED_FRACTION, STOPPED_FRACTION,
+    UNSETTLED_FRACTION, VOLTAGE_OFF_FRACTION,
+};
+use crate::diagnose::localise::types::{Phase, PhaseKind, ResidualRecord};
 use crate::estimation::records::noise_std;
 use crate::excitation::voltage::voltage_input;
-use motor_model::Input;
 
 /// Intervals collected in order, merging neighbours of one kind and dropping empty ones.
 pub(crate) struct PhaseList {

@@ -2,8 +2,9 @@
 //! what it answers: floors, excess tests, phases, windows, bands, spectra, angle ripples and
 //! the whiteness and cross-correlation of each channel.
 
-use crate::estimation::records::Channel;
 use serde::{Serialize, Serializer};
+
+use crate::estimation::records::Channel;
 
 /// One channel of a record: the measured samples and the model's prediction of them.
 #[derive(Debug, Clone, Copy)]
