@@ -5,9 +5,31 @@
 //! its parameters ([`EffectKind::params`]: key, symbol, unit, default, domain, whether a fit
 //! estimates it); parsing (`name:key=value,...`, keys not given take the table's default),
 //! printing, the list of names [`EFFECT_NAMES`] and the conversion to and from a vector of
-//! values ([`Effect::to_values`], [`Effect::from_values`]) all read that table. The dynamics
-//! each effect adds to the plant are in the simulator (`Dynamics`, one implementation per
-//! effect).
+//! values ([`Effect::to_values`], [`Effect::from_values`]) all read that table.
+//!
+//! Each effect is one module here: its parameters as a typed struct, its table, its values in
+//! the table's order, and what it adds to the plant's equations (its `Dynamics`: terms, own
+//! states, step limit). This module is the registry that names them all: the kinds, the
+//! [`Effect`] that holds any one of them, the [`Effects`] set, and the parsing and printing
+//! of `name:key=value,...`. Adding an effect is one module and its lines here.
+
+mod brush;
+mod cogging;
+mod drag;
+mod saturation;
+mod sensor_lag;
+mod spec;
+mod stribeck;
+mod thermal;
+
+pub use brush::BrushDrop;
+pub use cogging::CoggingTorque;
+pub use drag::QuadraticDrag;
+pub use saturation::InductanceSaturation;
+pub use sensor_lag::CurrentSensorLag;
+pub use spec::{Domain, ParamSpec};
+pub use stribeck::StribeckFriction;
+pub use thermal::{ThermalDrift, COPPER_ALPHA_PER_K};
 
 use std::fmt;
 use std::str::FromStr;
@@ -16,86 +38,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::ModelError;
 use crate::params::MotorParams;
-
-/// Copper's temperature coefficient of resistance at 20 °C \[1/K\] (IEC 60028 annealed copper).
-pub const COPPER_ALPHA_PER_K: f64 = 0.00393;
-
-/// `stribeck_friction`: the dry friction falls from a static level `Tst > Ts` to `Ts` with speed,
-/// `T_c(Ω) = Ts + (Tst − Ts) exp(−(Ω/Ωs)²)` \[N·m\]; breakaway needs `|k I| > Tst`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct StribeckFriction {
-    /// Static (breakaway) torque Tst \[N·m\], key `tst`; must exceed the motor's Ts.
-    pub static_torque_nm: f64,
-    /// Stribeck speed Ωs \[rad/s\], key `ws` (default 1).
-    pub stribeck_speed_rad_s: f64,
-}
-
-/// `cogging_torque`: a load torque periodic in the angle, `T_cog(θ) = A sin(N θ + φ)` \[N·m\].
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct CoggingTorque {
-    /// Amplitude A \[N·m\], key `amp`.
-    pub amplitude_nm: f64,
-    /// Periods per revolution N \[-\], key `n` (default 6).
-    pub periods_per_rev: u32,
-    /// Phase φ \[rad\], key `phase` (default 0).
-    pub phase_rad: f64,
-}
-
-/// `current_sensor_lag`: the current channel sees `I_f` with `τf dI_f/dt = I − I_f` \[A\]
-/// (first-order low-pass of time constant τf); the plant itself is unchanged.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct CurrentSensorLag {
-    /// Filter time constant τf \[s\], key `tau`.
-    pub tau_f_s: f64,
-}
-
-/// `thermal_drift`: `R = R0 (1 + α ΔT)`, with the winding temperature rise driven by the copper
-/// loss through a first-order thermal network, `Cth dΔT/dt = I² R − ΔT/Rth` \[K\].
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct ThermalDrift {
-    /// Thermal resistance winding→ambient Rth \[K/W\], key `rth`.
-    pub thermal_resistance_k_per_w: f64,
-    /// Thermal capacity of the winding Cth \[J/K\], key `cth`.
-    pub thermal_capacity_j_per_k: f64,
-    /// Temperature coefficient α \[1/K\], key `alpha` (default [`COPPER_ALPHA_PER_K`]).
-    pub alpha_per_k: f64,
-}
-
-/// `quadratic_drag`: an extra load torque `c Ω|Ω|` \[N·m\] (fan, fluid).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct QuadraticDrag {
-    /// Coefficient c \[N·m·s²/rad²\], key `c`.
-    pub c_nms2_per_rad2: f64,
-}
-
-/// `brush_drop`: a voltage drop across the brushes, `Vb sign(I)` \[V\], regularised linearly
-/// below a knee current (`Vb · clamp(I/I_knee, −1, 1)`: a brush film conducts ohmically at
-/// low current, and a true sign function would chatter).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct BrushDrop {
-    /// Drop Vb at full conduction \[V\], key `vb`.
-    pub drop_v: f64,
-    /// Knee current I_knee \[A\] below which the drop is proportional, key `knee` (default 0.05).
-    pub knee_current_a: f64,
-}
-
-/// `inductance_saturation`: the incremental inductance falls as `|I|` grows,
-/// `L(I) = L0 (r + (1 − r)/(1 + (I/I_sat)²))` \[H\], from L0 at rest towards `r L0`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct InductanceSaturation {
-    /// Saturation current I_sat \[A\] where L has fallen half-way, key `isat`.
-    pub saturation_current_a: f64,
-    /// Ratio r = L(∞)/L0 \[-\], key `ratio` (default 0.5), in (0, 1].
-    pub min_ratio: f64,
-}
-
-impl InductanceSaturation {
-    /// The factor `L(I)/L0 = r + (1 − r)/(1 + (I/I_sat)²)` \[-\] at current `i` \[A\].
-    pub fn factor(&self, i: f64) -> f64 {
-        let u = i / self.saturation_current_a;
-        self.min_ratio + (1.0 - self.min_ratio) / (1.0 + u * u)
-    }
-}
+use crate::sim::dynamics::Dynamics;
 
 /// The set of effects switched on in a simulation; the empty set is the paper's model.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
@@ -114,146 +57,6 @@ pub struct Effects {
     pub brush_drop: Option<BrushDrop>,
     /// See [`InductanceSaturation`].
     pub inductance_saturation: Option<InductanceSaturation>,
-}
-
-/// The set a parameter's value must lie in, with the transform to an unconstrained real that
-/// an optimiser can move freely ([`ParamSpec::to_unconstrained`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Domain {
-    /// Finite and `> 0`; unconstrained `θ = ln v`.
-    Positive,
-    /// Finite and `≥ 0`; unconstrained `θ = ln v` (a fit moves a size that is not zero: a
-    /// start of exactly 0 is refused by [`ParamSpec::to_unconstrained`]).
-    NonNegative,
-    /// Any finite value; unconstrained `θ = v`.
-    Finite,
-    /// Finite in `(0, 1]`; unconstrained `θ = ln(v/(1 − v))` (logit; a start of exactly 1 is
-    /// refused by [`ParamSpec::to_unconstrained`]).
-    UnitInterval,
-    /// A whole number from 1 to 65535 (a count, never fitted); unconstrained `θ = v`.
-    WholeNumber,
-    /// A torque \[N·m\] at least the motor's Coulomb torque Ts (checked when the simulator is
-    /// built, `> 0` alone when parsed); unconstrained `θ = ln(v − Ts)`, so that a fit moving
-    /// Ts keeps `v > Ts`: the value depends on `ln Ts` too, `∂v/∂(ln Ts) = Ts`.
-    AboveCoulomb,
-}
-
-impl Domain {
-    /// What the domain expects, in words.
-    pub fn expected(self) -> &'static str {
-        match self {
-            Domain::Positive | Domain::AboveCoulomb => "a finite value greater than zero",
-            Domain::NonNegative => "a finite value of zero or more",
-            Domain::Finite => "a finite number",
-            Domain::UnitInterval => "a finite value in (0, 1]",
-            Domain::WholeNumber => "a whole number from 1 to 65535",
-        }
-    }
-
-    /// Whether `value` lies in the domain (for [`Domain::AboveCoulomb`], the part that does
-    /// not need the motor: `> 0`).
-    pub fn contains(self, value: f64) -> bool {
-        value.is_finite()
-            && match self {
-                Domain::Positive | Domain::AboveCoulomb => value > 0.0,
-                Domain::NonNegative => value >= 0.0,
-                Domain::Finite => true,
-                Domain::UnitInterval => value > 0.0 && value <= 1.0,
-                Domain::WholeNumber => {
-                    value >= 1.0 && value.fract() == 0.0 && value <= f64::from(u16::MAX)
-                }
-            }
-    }
-
-    /// `value` if it lies in the domain, else the error naming the setting `name`.
-    pub fn check(self, name: &str, value: f64) -> Result<f64, ModelError> {
-        if self.contains(value) {
-            Ok(value)
-        } else {
-            Err(ModelError::InvalidSetting {
-                name: name.to_string(),
-                value,
-                expected: self.expected(),
-            })
-        }
-    }
-}
-
-/// One parameter of an effect: how it is written, its unit, its default and its domain.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ParamSpec {
-    /// Key in the command-line form `name:key=value`, e.g. `tst`.
-    pub key: &'static str,
-    /// Symbol in reports, e.g. `Tst`.
-    pub symbol: &'static str,
-    /// SI unit, e.g. `N·m` (`-` for a pure number).
-    pub unit: &'static str,
-    /// What it is, in words (for messages: "missing `tst=` (static friction torque in N·m)").
-    pub description: &'static str,
-    /// Value when the key is not given; `None` for a required key.
-    pub default: Option<f64>,
-    /// The values it may take.
-    pub domain: Domain,
-    /// Whether a fit estimates it; `false` for counts and material constants (a cogging
-    /// period count, copper's temperature coefficient) and numerical regularisations (the
-    /// brush knee).
-    pub fitted: bool,
-}
-
-impl ParamSpec {
-    /// The unconstrained coordinate of `value` ([`Domain`]); `motor` gives Ts for
-    /// [`Domain::AboveCoulomb`]. Refuses a value outside the domain or on a boundary the
-    /// transform cannot reach (0 for [`Domain::NonNegative`], 1 for [`Domain::UnitInterval`],
-    /// Ts for [`Domain::AboveCoulomb`]).
-    pub fn to_unconstrained(&self, value: f64, motor: &MotorParams) -> Result<f64, ModelError> {
-        self.domain.check(self.key, value)?;
-        let boundary = |expected| ModelError::InvalidSetting {
-            name: self.key.to_string(),
-            value,
-            expected,
-        };
-        match self.domain {
-            Domain::Positive => Ok(value.ln()),
-            Domain::NonNegative if value > 0.0 => Ok(value.ln()),
-            Domain::NonNegative => Err(boundary(
-                "a size greater than zero to start a fit from (it is fitted as ln v)",
-            )),
-            Domain::Finite | Domain::WholeNumber => Ok(value),
-            Domain::UnitInterval if value < 1.0 => Ok((value / (1.0 - value)).ln()),
-            Domain::UnitInterval => Err(boundary(
-                "a value below 1 to start a fit from (it is fitted as ln(v/(1 − v)))",
-            )),
-            Domain::AboveCoulomb if value > motor.ts_nm => Ok((value - motor.ts_nm).ln()),
-            Domain::AboveCoulomb => Err(boundary(
-                "a torque above the motor's Coulomb torque Ts to start a fit from (it is fitted as ln(v − Ts))",
-            )),
-        }
-    }
-
-    /// The value at unconstrained coordinate `theta` (inverse of
-    /// [`ParamSpec::to_unconstrained`]); `motor` gives Ts for [`Domain::AboveCoulomb`].
-    pub fn from_unconstrained(&self, theta: f64, motor: &MotorParams) -> f64 {
-        match self.domain {
-            Domain::Positive | Domain::NonNegative => theta.exp(),
-            Domain::Finite | Domain::WholeNumber => theta,
-            Domain::UnitInterval => 1.0 / (1.0 + (-theta).exp()),
-            Domain::AboveCoulomb => motor.ts_nm + theta.exp(),
-        }
-    }
-
-    /// `dv/dθ` at unconstrained coordinate `theta` (the delta method's factor from an
-    /// interval on θ to one on the value). For [`Domain::AboveCoulomb`] the value also moves
-    /// with `ln Ts`, by `Ts`.
-    pub fn slope(&self, theta: f64) -> f64 {
-        match self.domain {
-            Domain::Positive | Domain::NonNegative | Domain::AboveCoulomb => theta.exp(),
-            Domain::Finite | Domain::WholeNumber => 1.0,
-            Domain::UnitInterval => {
-                let v = 1.0 / (1.0 + (-theta).exp());
-                v * (1.0 - v)
-            }
-        }
-    }
 }
 
 /// The kinds of effect of SPEC section 5 (the nominal model, `none`, is no kind: it is the
@@ -275,149 +78,6 @@ pub enum EffectKind {
     /// [`InductanceSaturation`].
     InductanceSaturation,
 }
-
-const STRIBECK_PARAMS: [ParamSpec; 2] = [
-    ParamSpec {
-        key: "tst",
-        symbol: "Tst",
-        unit: "N·m",
-        description: "static friction torque",
-        default: None,
-        domain: Domain::AboveCoulomb,
-        fitted: true,
-    },
-    ParamSpec {
-        key: "ws",
-        symbol: "Ωs",
-        unit: "rad/s",
-        description: "Stribeck speed",
-        default: Some(1.0),
-        domain: Domain::Positive,
-        fitted: true,
-    },
-];
-
-const COGGING_PARAMS: [ParamSpec; 3] = [
-    ParamSpec {
-        key: "amp",
-        symbol: "A",
-        unit: "N·m",
-        description: "amplitude",
-        default: None,
-        domain: Domain::NonNegative,
-        fitted: true,
-    },
-    ParamSpec {
-        key: "n",
-        symbol: "N",
-        unit: "-",
-        description: "periods per revolution",
-        default: Some(6.0),
-        domain: Domain::WholeNumber,
-        fitted: false,
-    },
-    ParamSpec {
-        key: "phase",
-        symbol: "φ",
-        unit: "rad",
-        description: "phase",
-        default: Some(0.0),
-        domain: Domain::Finite,
-        fitted: true,
-    },
-];
-
-const SENSOR_LAG_PARAMS: [ParamSpec; 1] = [ParamSpec {
-    key: "tau",
-    symbol: "τf",
-    unit: "s",
-    description: "filter time constant",
-    default: None,
-    domain: Domain::Positive,
-    fitted: true,
-}];
-
-const THERMAL_PARAMS: [ParamSpec; 3] = [
-    ParamSpec {
-        key: "rth",
-        symbol: "Rth",
-        unit: "K/W",
-        description: "thermal resistance",
-        default: None,
-        domain: Domain::Positive,
-        fitted: true,
-    },
-    ParamSpec {
-        key: "cth",
-        symbol: "Cth",
-        unit: "J/K",
-        description: "thermal capacity",
-        default: None,
-        domain: Domain::Positive,
-        fitted: true,
-    },
-    ParamSpec {
-        key: "alpha",
-        symbol: "α",
-        unit: "1/K",
-        description: "temperature coefficient of resistance",
-        default: Some(COPPER_ALPHA_PER_K),
-        domain: Domain::NonNegative,
-        fitted: false,
-    },
-];
-
-const DRAG_PARAMS: [ParamSpec; 1] = [ParamSpec {
-    key: "c",
-    symbol: "c",
-    unit: "N·m·s²/rad²",
-    description: "coefficient",
-    default: None,
-    domain: Domain::NonNegative,
-    fitted: true,
-}];
-
-const BRUSH_PARAMS: [ParamSpec; 2] = [
-    ParamSpec {
-        key: "vb",
-        symbol: "Vb",
-        unit: "V",
-        description: "drop",
-        default: None,
-        domain: Domain::NonNegative,
-        fitted: true,
-    },
-    ParamSpec {
-        key: "knee",
-        symbol: "I_knee",
-        unit: "A",
-        description: "knee current",
-        default: Some(0.05),
-        domain: Domain::Positive,
-        fitted: false,
-    },
-];
-
-const SATURATION_PARAMS: [ParamSpec; 2] = [
-    ParamSpec {
-        key: "isat",
-        symbol: "I_sat",
-        unit: "A",
-        description: "saturation current",
-        default: None,
-        domain: Domain::Positive,
-        fitted: true,
-    },
-    ParamSpec {
-        key: "ratio",
-        symbol: "r",
-        unit: "-",
-        description: "ratio L(∞)/L0",
-        default: Some(0.5),
-        domain: Domain::UnitInterval,
-        fitted: true,
-    },
-];
 
 impl EffectKind {
     /// Every kind, in the order of [`EFFECT_NAMES`].
@@ -447,13 +107,13 @@ impl EffectKind {
     /// The table of its parameters, in the order of [`Effect::to_values`].
     pub const fn params(self) -> &'static [ParamSpec] {
         match self {
-            EffectKind::StribeckFriction => &STRIBECK_PARAMS,
-            EffectKind::CoggingTorque => &COGGING_PARAMS,
-            EffectKind::CurrentSensorLag => &SENSOR_LAG_PARAMS,
-            EffectKind::ThermalDrift => &THERMAL_PARAMS,
-            EffectKind::QuadraticDrag => &DRAG_PARAMS,
-            EffectKind::BrushDrop => &BRUSH_PARAMS,
-            EffectKind::InductanceSaturation => &SATURATION_PARAMS,
+            EffectKind::StribeckFriction => &stribeck::STRIBECK_PARAMS,
+            EffectKind::CoggingTorque => &cogging::COGGING_PARAMS,
+            EffectKind::CurrentSensorLag => &sensor_lag::SENSOR_LAG_PARAMS,
+            EffectKind::ThermalDrift => &thermal::THERMAL_PARAMS,
+            EffectKind::QuadraticDrag => &drag::DRAG_PARAMS,
+            EffectKind::BrushDrop => &brush::BRUSH_PARAMS,
+            EffectKind::InductanceSaturation => &saturation::SATURATION_PARAMS,
         }
     }
 
@@ -546,19 +206,13 @@ impl Effect {
     /// (a count as a whole `f64`); empty for `none`.
     pub fn to_values(&self) -> Vec<f64> {
         match *self {
-            Effect::StribeckFriction(e) => vec![e.static_torque_nm, e.stribeck_speed_rad_s],
-            Effect::CoggingTorque(e) => {
-                vec![e.amplitude_nm, f64::from(e.periods_per_rev), e.phase_rad]
-            }
-            Effect::CurrentSensorLag(e) => vec![e.tau_f_s],
-            Effect::ThermalDrift(e) => vec![
-                e.thermal_resistance_k_per_w,
-                e.thermal_capacity_j_per_k,
-                e.alpha_per_k,
-            ],
-            Effect::QuadraticDrag(e) => vec![e.c_nms2_per_rad2],
-            Effect::BrushDrop(e) => vec![e.drop_v, e.knee_current_a],
-            Effect::InductanceSaturation(e) => vec![e.saturation_current_a, e.min_ratio],
+            Effect::StribeckFriction(e) => e.to_values(),
+            Effect::CoggingTorque(e) => e.to_values(),
+            Effect::CurrentSensorLag(e) => e.to_values(),
+            Effect::ThermalDrift(e) => e.to_values(),
+            Effect::QuadraticDrag(e) => e.to_values(),
+            Effect::BrushDrop(e) => e.to_values(),
+            Effect::InductanceSaturation(e) => e.to_values(),
             Effect::None => Vec::new(),
         }
     }
@@ -584,36 +238,18 @@ impl Effect {
             })
             .collect::<Result<Vec<f64>, _>>()?;
         Ok(match kind {
-            EffectKind::StribeckFriction => Effect::StribeckFriction(StribeckFriction {
-                static_torque_nm: v[0],
-                stribeck_speed_rad_s: v[1],
-            }),
-            EffectKind::CoggingTorque => Effect::CoggingTorque(CoggingTorque {
-                amplitude_nm: v[0],
-                // A whole number from 1 to 65535 (checked above).
-                periods_per_rev: v[1] as u32,
-                phase_rad: v[2],
-            }),
-            EffectKind::CurrentSensorLag => {
-                Effect::CurrentSensorLag(CurrentSensorLag { tau_f_s: v[0] })
+            EffectKind::StribeckFriction => {
+                Effect::StribeckFriction(StribeckFriction::from_checked(&v))
             }
-            EffectKind::ThermalDrift => Effect::ThermalDrift(ThermalDrift {
-                thermal_resistance_k_per_w: v[0],
-                thermal_capacity_j_per_k: v[1],
-                alpha_per_k: v[2],
-            }),
-            EffectKind::QuadraticDrag => Effect::QuadraticDrag(QuadraticDrag {
-                c_nms2_per_rad2: v[0],
-            }),
-            EffectKind::BrushDrop => Effect::BrushDrop(BrushDrop {
-                drop_v: v[0],
-                knee_current_a: v[1],
-            }),
+            EffectKind::CoggingTorque => Effect::CoggingTorque(CoggingTorque::from_checked(&v)),
+            EffectKind::CurrentSensorLag => {
+                Effect::CurrentSensorLag(CurrentSensorLag::from_checked(&v))
+            }
+            EffectKind::ThermalDrift => Effect::ThermalDrift(ThermalDrift::from_checked(&v)),
+            EffectKind::QuadraticDrag => Effect::QuadraticDrag(QuadraticDrag::from_checked(&v)),
+            EffectKind::BrushDrop => Effect::BrushDrop(BrushDrop::from_checked(&v)),
             EffectKind::InductanceSaturation => {
-                Effect::InductanceSaturation(InductanceSaturation {
-                    saturation_current_a: v[0],
-                    min_ratio: v[1],
-                })
+                Effect::InductanceSaturation(InductanceSaturation::from_checked(&v))
             }
         })
     }
@@ -868,5 +504,73 @@ impl Effects {
             }
         }
         Ok(())
+    }
+}
+
+/// The nominal model adds nothing.
+pub(crate) struct Nominal;
+
+impl Dynamics for Nominal {}
+
+/// Calls `$call` on the effect inside `$effect` (static dispatch, so that the simulator's inner
+/// loop inlines each effect's equations).
+macro_rules! on_effect {
+    ($effect:expr, $e:ident => $call:expr) => {
+        match $effect {
+            Effect::StribeckFriction($e) => $call,
+            Effect::CoggingTorque($e) => $call,
+            Effect::CurrentSensorLag($e) => $call,
+            Effect::ThermalDrift($e) => $call,
+            Effect::QuadraticDrag($e) => $call,
+            Effect::BrushDrop($e) => $call,
+            Effect::InductanceSaturation($e) => $call,
+            Effect::None => {
+                let $e = &Nominal;
+                $call
+            }
+        }
+    };
+}
+
+/// An effect's part is that of the effect it holds.
+impl Dynamics for Effect {
+    fn states(&self) -> usize {
+        on_effect!(self, e => e.states())
+    }
+    fn resistance_factor(&self, own: &[f64]) -> f64 {
+        on_effect!(self, e => e.resistance_factor(own))
+    }
+    fn inductance_factor(&self, i: f64) -> f64 {
+        on_effect!(self, e => e.inductance_factor(i))
+    }
+    fn min_inductance_factor(&self) -> f64 {
+        on_effect!(self, e => e.min_inductance_factor())
+    }
+    fn voltage_drop(&self, i: f64) -> f64 {
+        on_effect!(self, e => e.voltage_drop(i))
+    }
+    fn incremental_resistance(&self) -> f64 {
+        on_effect!(self, e => e.incremental_resistance())
+    }
+    fn load_torque(&self, w: f64, theta: f64) -> f64 {
+        on_effect!(self, e => e.load_torque(w, theta))
+    }
+    fn dry_friction(&self, ts: f64, w: f64) -> Option<f64> {
+        on_effect!(self, e => e.dry_friction(ts, w))
+    }
+    fn derivative(&self, i: f64, r: f64, own: &[f64], d_own: &mut [f64]) {
+        on_effect!(self, e => e.derivative(i, r, own, d_own))
+    }
+    fn sensor_state(&self) -> Option<usize> {
+        on_effect!(self, e => e.sensor_state())
+    }
+    fn sensor_time_constant(&self) -> Option<f64> {
+        on_effect!(self, e => e.sensor_time_constant())
+    }
+    fn own_rate(&self, p: &MotorParams) -> f64 {
+        on_effect!(self, e => e.own_rate(p))
+    }
+    fn step_limit(&self, p: &MotorParams, speed: f64, tolerance: Option<f64>) -> f64 {
+        on_effect!(self, e => e.step_limit(p, speed, tolerance))
     }
 }

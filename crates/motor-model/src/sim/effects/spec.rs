@@ -1,0 +1,144 @@
+//! The table of an effect parameter ([`ParamSpec`]: key, symbol, unit, default, domain, whether
+//! a fit estimates it) and the domains a value is checked against ([`Domain`]).
+use crate::error::ModelError;
+use crate::params::MotorParams;
+
+/// The set a parameter's value must lie in, with the transform to an unconstrained real that
+/// an optimiser can move freely ([`ParamSpec::to_unconstrained`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Domain {
+    /// Finite and `> 0`; unconstrained `θ = ln v`.
+    Positive,
+    /// Finite and `≥ 0`; unconstrained `θ = ln v` (a fit moves a size that is not zero: a
+    /// start of exactly 0 is refused by [`ParamSpec::to_unconstrained`]).
+    NonNegative,
+    /// Any finite value; unconstrained `θ = v`.
+    Finite,
+    /// Finite in `(0, 1]`; unconstrained `θ = ln(v/(1 − v))` (logit; a start of exactly 1 is
+    /// refused by [`ParamSpec::to_unconstrained`]).
+    UnitInterval,
+    /// A whole number from 1 to 65535 (a count, never fitted); unconstrained `θ = v`.
+    WholeNumber,
+    /// A torque \[N·m\] at least the motor's Coulomb torque Ts (checked when the simulator is
+    /// built, `> 0` alone when parsed); unconstrained `θ = ln(v − Ts)`, so that a fit moving
+    /// Ts keeps `v > Ts`: the value depends on `ln Ts` too, `∂v/∂(ln Ts) = Ts`.
+    AboveCoulomb,
+}
+
+impl Domain {
+    /// What the domain expects, in words.
+    pub fn expected(self) -> &'static str {
+        match self {
+            Domain::Positive | Domain::AboveCoulomb => "a finite value greater than zero",
+            Domain::NonNegative => "a finite value of zero or more",
+            Domain::Finite => "a finite number",
+            Domain::UnitInterval => "a finite value in (0, 1]",
+            Domain::WholeNumber => "a whole number from 1 to 65535",
+        }
+    }
+
+    /// Whether `value` lies in the domain (for [`Domain::AboveCoulomb`], the part that does
+    /// not need the motor: `> 0`).
+    pub fn contains(self, value: f64) -> bool {
+        value.is_finite()
+            && match self {
+                Domain::Positive | Domain::AboveCoulomb => value > 0.0,
+                Domain::NonNegative => value >= 0.0,
+                Domain::Finite => true,
+                Domain::UnitInterval => value > 0.0 && value <= 1.0,
+                Domain::WholeNumber => {
+                    value >= 1.0 && value.fract() == 0.0 && value <= f64::from(u16::MAX)
+                }
+            }
+    }
+
+    /// `value` if it lies in the domain, else the error naming the setting `name`.
+    pub fn check(self, name: &str, value: f64) -> Result<f64, ModelError> {
+        if self.contains(value) {
+            Ok(value)
+        } else {
+            Err(ModelError::InvalidSetting {
+                name: name.to_string(),
+                value,
+                expected: self.expected(),
+            })
+        }
+    }
+}
+
+/// One parameter of an effect: how it is written, its unit, its default and its domain.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParamSpec {
+    /// Key in the command-line form `name:key=value`, e.g. `tst`.
+    pub key: &'static str,
+    /// Symbol in reports, e.g. `Tst`.
+    pub symbol: &'static str,
+    /// SI unit, e.g. `N·m` (`-` for a pure number).
+    pub unit: &'static str,
+    /// What it is, in words (for messages: "missing `tst=` (static friction torque in N·m)").
+    pub description: &'static str,
+    /// Value when the key is not given; `None` for a required key.
+    pub default: Option<f64>,
+    /// The values it may take.
+    pub domain: Domain,
+    /// Whether a fit estimates it; `false` for counts and material constants (a cogging
+    /// period count, copper's temperature coefficient) and numerical regularisations (the
+    /// brush knee).
+    pub fitted: bool,
+}
+
+impl ParamSpec {
+    /// The unconstrained coordinate of `value` ([`Domain`]); `motor` gives Ts for
+    /// [`Domain::AboveCoulomb`]. Refuses a value outside the domain or on a boundary the
+    /// transform cannot reach (0 for [`Domain::NonNegative`], 1 for [`Domain::UnitInterval`],
+    /// Ts for [`Domain::AboveCoulomb`]).
+    pub fn to_unconstrained(&self, value: f64, motor: &MotorParams) -> Result<f64, ModelError> {
+        self.domain.check(self.key, value)?;
+        let boundary = |expected| ModelError::InvalidSetting {
+            name: self.key.to_string(),
+            value,
+            expected,
+        };
+        match self.domain {
+            Domain::Positive => Ok(value.ln()),
+            Domain::NonNegative if value > 0.0 => Ok(value.ln()),
+            Domain::NonNegative => Err(boundary(
+                "a size greater than zero to start a fit from (it is fitted as ln v)",
+            )),
+            Domain::Finite | Domain::WholeNumber => Ok(value),
+            Domain::UnitInterval if value < 1.0 => Ok((value / (1.0 - value)).ln()),
+            Domain::UnitInterval => Err(boundary(
+                "a value below 1 to start a fit from (it is fitted as ln(v/(1 − v)))",
+            )),
+            Domain::AboveCoulomb if value > motor.ts_nm => Ok((value - motor.ts_nm).ln()),
+            Domain::AboveCoulomb => Err(boundary(
+                "a torque above the motor's Coulomb torque Ts to start a fit from (it is fitted as ln(v − Ts))",
+            )),
+        }
+    }
+
+    /// The value at unconstrained coordinate `theta` (inverse of
+    /// [`ParamSpec::to_unconstrained`]); `motor` gives Ts for [`Domain::AboveCoulomb`].
+    pub fn from_unconstrained(&self, theta: f64, motor: &MotorParams) -> f64 {
+        match self.domain {
+            Domain::Positive | Domain::NonNegative => theta.exp(),
+            Domain::Finite | Domain::WholeNumber => theta,
+            Domain::UnitInterval => 1.0 / (1.0 + (-theta).exp()),
+            Domain::AboveCoulomb => motor.ts_nm + theta.exp(),
+        }
+    }
+
+    /// `dv/dθ` at unconstrained coordinate `theta` (the delta method's factor from an
+    /// interval on θ to one on the value). For [`Domain::AboveCoulomb`] the value also moves
+    /// with `ln Ts`, by `Ts`.
+    pub fn slope(&self, theta: f64) -> f64 {
+        match self.domain {
+            Domain::Positive | Domain::NonNegative | Domain::AboveCoulomb => theta.exp(),
+            Domain::Finite | Domain::WholeNumber => 1.0,
+            Domain::UnitInterval => {
+                let v = 1.0 / (1.0 + (-theta).exp());
+                v * (1.0 - v)
+            }
+        }
+    }
+}
