@@ -61,11 +61,12 @@ pub(crate) fn is_space(b: u8) -> bool {
     matches!(b, b'\t'..=b'\r' | b' ')
 }
 
-/// `bytes` from the first byte that is not white space ([`is_space`]) on.
-pub(crate) fn skip_space(bytes: &[u8]) -> &[u8] {
+/// `bytes` from the first byte that is not white space ([`is_space`]) on; the field
+/// `delimiter` (a tab) is never skipped.
+pub(crate) fn skip_space(bytes: &[u8], delimiter: u8) -> &[u8] {
     let start = bytes
         .iter()
-        .position(|&b| !is_space(b))
+        .position(|&b| b == delimiter || !is_space(b))
         .unwrap_or(bytes.len());
     &bytes[start..]
 }
@@ -82,6 +83,82 @@ pub(crate) struct TableParser {
     /// Whether data rows of plain numbers are read from the bytes ([`TableParser::numeric_row`]);
     /// without, every line takes [`TableParser::text_line`] (the tests compare the two).
     pub(crate) rows_from_bytes: bool,
+    /// How the file writes its rows, found from its header ([`Dialect::of_header`]).
+    pub(crate) dialect: Dialect,
+}
+
+/// How a CSV file writes its rows, as spreadsheets and data tools export them: the field
+/// delimiter (`,`; `;` as Excel writes it where the decimal mark is a comma; a tab), whether a
+/// comma inside a field is a decimal mark, and whether the first column is an unnamed index
+/// (pandas' `to_csv()`), read and dropped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Dialect {
+    /// The field delimiter.
+    pub(crate) delimiter: u8,
+    /// Whether a comma inside a field is the decimal mark (`1,5` for 1.5): with `;` or a tab
+    /// as the delimiter.
+    pub(crate) decimal_comma: bool,
+    /// Whether the first column is an index with no name, dropped from every row.
+    pub(crate) index_column: bool,
+}
+
+impl Default for Dialect {
+    fn default() -> Self {
+        Dialect {
+            delimiter: b',',
+            decimal_comma: false,
+            index_column: false,
+        }
+    }
+}
+
+impl Dialect {
+    /// The dialect a header line shows: the delimiter among `,`, `;` and a tab that it holds
+    /// most often (a comma on a tie), a decimal comma with any other delimiter, and an index
+    /// column when its first name is empty and others follow.
+    pub(crate) fn of_header(line: &str) -> Dialect {
+        let count = |c: char| line.matches(c).count();
+        let delimiter = [(b';', count(';')), (b'\t', count('\t'))]
+            .into_iter()
+            .filter(|&(_, n)| n > count(','))
+            .max_by_key(|&(_, n)| n)
+            .map_or(b',', |(d, _)| d);
+        let mut names = line.split(char::from(delimiter));
+        let index_column =
+            names.next().is_some_and(|first| unquote(first).is_empty()) && names.next().is_some();
+        Dialect {
+            delimiter,
+            decimal_comma: delimiter != b',',
+            index_column,
+        }
+    }
+
+    /// The fields of a row, the index column dropped.
+    pub(crate) fn fields<'a>(&self, line: &'a str) -> impl Iterator<Item = &'a str> {
+        line.split(char::from(self.delimiter))
+            .skip(usize::from(self.index_column))
+    }
+
+    /// The number a field holds: white space and quotes around it removed, a decimal comma
+    /// read as a point.
+    pub(crate) fn number(&self, field: &str) -> Option<f64> {
+        let field = unquote(field);
+        if self.decimal_comma && field.contains(',') {
+            field.replace(',', ".").parse().ok()
+        } else {
+            field.parse().ok()
+        }
+    }
+}
+
+/// `field` without the white space and the pair of double quotes around it (`"t[s]"` as
+/// Python's `csv` and Excel write a header).
+pub(crate) fn unquote(field: &str) -> &str {
+    let field = field.trim();
+    field
+        .strip_prefix('"')
+        .and_then(|f| f.strip_suffix('"'))
+        .map_or(field, str::trim)
 }
 
 impl TableParser {
@@ -93,6 +170,7 @@ impl TableParser {
             saw_newline: true,
             size_hint,
             rows_from_bytes: true,
+            dialect: Dialect::default(),
         }
     }
 
@@ -141,13 +219,21 @@ impl TableParser {
             self.reserve_rows(bytes.len(), ahead);
         }
         let columns = &mut self.table.columns;
+        let delimiter = self.dialect.delimiter;
         let mut rest = bytes;
+        if self.dialect.index_column {
+            // The index: up to the first delimiter, whatever it holds.
+            match memchr::memchr(delimiter, rest) {
+                Some(i) => rest = &rest[i + 1..],
+                None => return false,
+            }
+        }
         let mut pushed = 0;
         let complete = loop {
             let Some(column) = columns.get_mut(pushed) else {
                 break false;
             };
-            let field = skip_space(rest);
+            let field = skip_space(rest, delimiter);
             let Ok((v, used)) = fast_float2::parse_partial::<f64, _>(field) else {
                 break false;
             };
@@ -156,9 +242,9 @@ impl TableParser {
             }
             column.push(v);
             pushed += 1;
-            match skip_space(&field[used..]).split_first() {
+            match skip_space(&field[used..], delimiter).split_first() {
                 None => break pushed == columns.len(),
-                Some((b',', tail)) => rest = tail,
+                Some((&b, tail)) if b == delimiter => rest = tail,
                 Some(_) => break false,
             }
         };
@@ -240,16 +326,18 @@ impl TableParser {
             return Ok(());
         }
         if table.names.is_empty() {
-            return parse_header(table, line, line_no);
+            self.dialect = Dialect::of_header(line);
+            return parse_header(table, line, line_no, self.dialect);
         }
+        let dialect = self.dialect;
         let width = table.names.len();
         let mut count = 0usize;
-        for field in line.split(',') {
+        for field in dialect.fields(line) {
             let Some(name) = table.names.get(count) else {
                 count += 1;
                 break;
             };
-            let v: f64 = field.trim().parse().map_err(|_| {
+            let v: f64 = dialect.number(field).ok_or_else(|| {
                 (
                     line_no,
                     format!("column `{name}`: `{}` is not a number", field.trim()),
@@ -267,7 +355,7 @@ impl TableParser {
         if count != width {
             let (fields, hint) = if count > width {
                 (
-                    line.split(',').count(),
+                    dialect.fields(line).count(),
                     "a stray comma, or lines of two files run together?",
                 )
             } else {
@@ -363,17 +451,14 @@ pub(crate) fn parse_header(
     table: &mut Table,
     line: &str,
     line_no: usize,
+    dialect: Dialect,
 ) -> std::result::Result<(), (usize, String)> {
-    if !line.contains(',') {
-        for (sep, name) in [(';', "semicolons"), ('\t', "tabs"), ('|', "bars")] {
-            if line.contains(sep) {
-                return Err((line_no, format!("the header is separated by {name}: records are comma-separated (e.g. tr '{}' ',' < in > out)", if sep == '\t' { "\\t".to_string() } else { sep.to_string() })));
-            }
-        }
+    if dialect.delimiter == b',' && !line.contains(',') && line.contains('|') {
+        return Err((line_no, "the header is separated by bars: records are separated by commas, semicolons or tabs (e.g. tr '|' ',' < in > out)".to_string()));
     }
     table.header_line = line_no;
-    for raw in line.split(',') {
-        let (name, unit) = split_unit(raw);
+    for raw in dialect.fields(line) {
+        let (name, unit) = split_unit(unquote(raw));
         if name.is_empty() {
             return Err((
                 line_no,

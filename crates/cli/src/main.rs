@@ -27,7 +27,7 @@ mod steps;
 
 use std::process::ExitCode;
 
-use clap::Parser;
+use clap::{CommandFactory, FromArgMatches};
 
 use crate::errors::BadInput;
 use crate::errors::NotConverged;
@@ -95,7 +95,9 @@ fn declared_outputs(command: &Command) -> Vec<output::Declared> {
 
 fn main() -> ExitCode {
     quiet_broken_pipe();
-    let cli = Cli::parse();
+    // A negative number is an option's value (`--torque-constant -0.05`), never a flag.
+    let command = Cli::command().mut_subcommands(|c| c.allow_negative_numbers(true));
+    let cli = Cli::from_arg_matches(&command.get_matches()).unwrap_or_else(|e| e.exit());
     let outcome =
         output::check(&declared_outputs(&cli.command)).and_then(|()| match cli.command {
             Command::Model(a) => {

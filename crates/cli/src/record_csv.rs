@@ -449,6 +449,28 @@ mod tests {
     }
 
     #[test]
+    fn every_dialect_reads_to_the_same_table() {
+        let plain = parse_bytes(b"t[s],voltage[V]\n0,1.5\n0.001,2\n").unwrap();
+        for text in [
+            &b",t[s],voltage[V]\n0,0,1.5\n1,0.001,2\n"[..],
+            b"\"t[s]\",\"voltage[V]\"\n0,1.5\n0.001,2\n",
+            b"t[s];voltage[V]\n0;1,5\n0,001;2\n",
+            b"\"t[s]\";\"voltage[V]\"\r\n0;\"1,5\"\r\n0,001;2\r\n",
+            b"t[s]\tvoltage[V]\n0\t1.5\n0.001\t2\n",
+        ] {
+            let t = parse_bytes(text).unwrap();
+            let shown = String::from_utf8_lossy(text);
+            assert_eq!(
+                (&t.names, &t.units),
+                (&plain.names, &plain.units),
+                "{shown}"
+            );
+            assert_eq!(t.columns, plain.columns, "{shown}");
+            assert_eq!(t.lines, plain.lines, "{shown}");
+        }
+    }
+
+    #[test]
     fn units_in_the_header_are_converted_to_si() {
         let loaded = record(
             "# a comment\nt[ms],voltage[mV],current[mA],speed[rpm],position[deg]\n0,0,0,0,0\n1,40000,1500,60,180\n2,40000,1500,60,360\n",
@@ -554,10 +576,18 @@ mod tests {
             ),
             crlf in any::<bool>(),
             buffer in 1usize..64,
+            delimiter in prop_oneof![Just(","), Just(";"), Just("\t")],
+            index in any::<bool>(),
         ) {
+            // Every dialect: the delimiter, and an unnamed index column (pandas) or not.
             let sep = if crlf { "\r\n" } else { "\n" };
-            let text: String = std::iter::once("t,voltage,current".to_string())
-                .chain(rows.iter().map(|r| r.join(",")))
+            let lead = |i: Option<usize>| match (index, i) {
+                (false, _) => String::new(),
+                (true, None) => delimiter.to_string(),
+                (true, Some(i)) => format!("{i}{delimiter}"),
+            };
+            let text: String = std::iter::once(lead(None) + &["t", "voltage", "current"].join(delimiter))
+                .chain(rows.iter().enumerate().map(|(i, r)| lead(Some(i)) + &r.join(delimiter)))
                 .map(|line| line + sep)
                 .collect();
             let fast = parse_with(

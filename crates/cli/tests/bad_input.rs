@@ -143,14 +143,16 @@ fn broken_files_give_one_line_errors_naming_file_and_line() {
             ":5: 5 fields where the header has 4 (a stray comma",
         ),
         (
-            "semicolons.csv",
-            b"t;voltage;current\n0;1;2\n".to_vec(),
-            ":1: the header is separated by semicolons",
+            "bars.csv",
+            b"t|voltage|current\n0|1|2\n".to_vec(),
+            ":1: the header is separated by bars",
         ),
         (
-            "tabs.tsv",
-            b"t\tvoltage\tcurrent\n0\t1\t2\n".to_vec(),
-            ":1: the header is separated by tabs",
+            // Semicolons are a delimiter (with decimal commas); a row with commas in it
+            // then has a field that is not a number.
+            "semicolons_mixed.csv",
+            b"t;voltage;current\n0;1;2\n0.001;1,2,3;2\n".to_vec(),
+            ":3: column `voltage`: `1,2,3` is not a number",
         ),
         (
             "latin1.csv",
@@ -797,5 +799,38 @@ fn a_current_in_ma_beyond_the_metadata_range_is_named_a_units_problem() {
             low.to_str().unwrap(),
         ],
         "lies beyond the ADC's range",
+    );
+}
+
+/// A negative number is an option's value, checked as such, never taken for a flag
+/// (`--torque-constant -0.05` was "unexpected argument '-0'").
+#[test]
+fn negative_numbers_are_option_values_checked_as_such() {
+    let dir = scratch("negative-values");
+    let h = simulated(&dir, "h.csv", &["--voltage", "40", "--duration", "2", "-q"]);
+    let h = h.to_str().unwrap();
+    assert_bad_input(
+        &[
+            "identify",
+            "--high",
+            h,
+            "--low",
+            h,
+            "--torque-constant",
+            "-0.05",
+        ],
+        "--torque-constant -0.05: expected a positive number",
+    );
+    assert_bad_input(
+        &[
+            "diagnose",
+            "--record",
+            h,
+            "--input",
+            "current",
+            "--torque-constant",
+            "-0.05",
+        ],
+        "--torque-constant -0.05: expected a positive number",
     );
 }

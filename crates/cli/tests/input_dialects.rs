@@ -1,0 +1,120 @@
+//! Records as spreadsheets and data tools write them: a pandas `to_csv()` file (an unnamed
+//! index column first), a header in double quotes (Python's `csv`, Excel), `;` with decimal
+//! commas (Excel where the decimal mark is a comma), tabs. Each is the same record as the
+//! plain CSV it was rewritten from, and identifies to the very same parameters.
+
+mod common;
+
+use std::path::Path;
+
+use common::{motorid, scratch, small_servo_steps, stderr, stdout};
+use serde_json::Value;
+
+/// Writes `src` to `dst` with its header line passed through `header` and each data row
+/// (numbered from 0) through `row`; comment lines are kept as they are.
+fn rewrite(
+    src: &str,
+    dst: &Path,
+    header: impl Fn(&str) -> String,
+    row: impl Fn(usize, &str) -> String,
+) -> String {
+    let text = std::fs::read_to_string(src).unwrap();
+    let mut out = String::new();
+    let mut rows = 0;
+    let mut seen_header = false;
+    for line in text.lines() {
+        let line = if line.starts_with('#') {
+            line.to_string()
+        } else if !seen_header {
+            seen_header = true;
+            header(line)
+        } else {
+            rows += 1;
+            row(rows - 1, line)
+        };
+        out.push_str(&line);
+        out.push('\n');
+    }
+    std::fs::write(dst, out).unwrap();
+    dst.to_str().unwrap().to_string()
+}
+
+/// The identified parameters of a step pair (`parameters` of `identify --json`).
+fn parameters(high: &str, low: &str) -> Value {
+    let out = motorid(&[
+        "identify", "--high", high, "--low", low, "--json", "--quiet",
+    ]);
+    assert!(out.status.success(), "{high}: {}", stderr(&out));
+    let json: Value = serde_json::from_str(&stdout(&out)).unwrap();
+    json["parameters"].clone()
+}
+
+#[test]
+fn records_as_spreadsheets_and_data_tools_write_them_identify_as_the_plain_csv() {
+    let dir = scratch("input-dialects");
+    let [high, low] = small_servo_steps(&dir, None);
+    let plain = parameters(&high, &low);
+    assert!(plain.is_object() && plain["R"].is_object(), "{plain}");
+    type Rewrite = (&'static str, fn(&str) -> String, fn(usize, &str) -> String);
+    let dialects: [Rewrite; 4] = [
+        ("pandas", |h| format!(",{h}"), |i, r| format!("{i},{r}")),
+        (
+            "quoted",
+            |h| {
+                h.split(',')
+                    .map(|f| format!("\"{f}\""))
+                    .collect::<Vec<_>>()
+                    .join(",")
+            },
+            |_, r| r.to_string(),
+        ),
+        (
+            "excel-decimal-comma",
+            |h| h.replace(',', ";"),
+            |_, r| r.replace(',', ";").replace('.', ","),
+        ),
+        (
+            "tabs",
+            |h| h.replace(',', "\t"),
+            |_, r| r.replace(',', "\t"),
+        ),
+    ];
+    for (name, header, row) in dialects {
+        let [h, l] = [&high, &low].map(|src| {
+            let file = Path::new(src).file_name().unwrap().to_str().unwrap();
+            rewrite(
+                src,
+                &dir.as_ref().join(format!("{name}-{file}")),
+                header,
+                row,
+            )
+        });
+        assert_ne!(
+            std::fs::read_to_string(&h).unwrap(),
+            std::fs::read_to_string(&high).unwrap(),
+            "{name}: not rewritten"
+        );
+        assert_eq!(parameters(&h, &l), plain, "{name}");
+    }
+}
+
+#[test]
+fn a_decimal_comma_in_a_comma_separated_file_is_still_an_error_naming_the_line() {
+    // With commas as delimiters, `1,5` is two fields: the row has one field too many.
+    let dir = scratch("input-dialects-bad");
+    let path = dir.as_ref().join("mixed.csv");
+    let mut text = String::from("t,voltage,current,speed\n");
+    for i in 0..50 {
+        text.push_str(&format!("{},12,1,{}\n", i as f64 * 1e-3, i));
+    }
+    text.push_str("0,05,12,1,5\n");
+    std::fs::write(&path, text).unwrap();
+    let p = path.to_str().unwrap();
+    let out = motorid(&["identify", "--high", p, "--low", p]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("mixed.csv:52: 5 fields where the header has 4"),
+        "{}",
+        stderr(&out)
+    );
+}
