@@ -314,6 +314,28 @@ fn demo_prints_tables_1_and_2_beside_the_paper() {
         assert!(text.contains(line), "missing `{line}` in\n{text}");
     }
     assert!(text.contains("0.3881 ≠ 0.3381"));
+    // Each full-model table says whether each 95 % interval contains the truth, and a table
+    // with a "no" says why in the line after it: through the logger (noise) every one holds.
+    let tables: Vec<&str> = text.split("full 95% CI contains truth").skip(1).collect();
+    assert_eq!(tables.len(), 2, "{text}");
+    for table in &tables {
+        let rows: Vec<&str> = table.lines().skip(1).take(6).collect();
+        assert!(
+            rows.iter().all(|r| r.ends_with("yes") || r.ends_with("no")),
+            "{rows:?}"
+        );
+        if rows.iter().any(|r| r.ends_with("no")) {
+            assert!(
+                table.contains("(\"no\": the records are exact;"),
+                "a \"no\" without its reason:\n{table}"
+            );
+        }
+    }
+    let logger_rows: Vec<&str> = tables[1].lines().skip(1).take(6).collect();
+    assert!(
+        logger_rows.iter().all(|r| r.ends_with("yes")),
+        "{logger_rows:?}"
+    );
     // It ends with a diagnosis that names the withheld brush drop, its truth in its interval.
     let verdict = text
         .lines()
