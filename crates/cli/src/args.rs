@@ -342,7 +342,8 @@ pub struct IdentifyArgs {
         allow_negative_numbers = true
     )]
     pub folder_limit: Option<f64>,
-    /// Column names of a file from another tool: t=HEADER,current=HEADER,position=HEADER,...
+    /// Column names of a file from another tool: t=HEADER,current=HEADER,position=HEADER,...;
+    /// a unit in brackets where the file's header has none (speed=speed_rpm[rpm], t=time[ms])
     #[arg(long, value_name = "NAME=HEADER,...")]
     pub columns: Option<String>,
     /// Rotary axis (rad: kg·m², N·m·s/rad, N·m) or linear axis (m: kg, N·s/m, N).

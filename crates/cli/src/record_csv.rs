@@ -271,6 +271,26 @@ fn to_record(
             None => table.names.iter().position(|n| canonical(n) == Some(name)),
         }
     };
+    // A unit given with a mapped header (`--columns speed=speed_rpm[rpm]`) is that column's
+    // unit when the file's header gives none; a different one is a contradiction.
+    for (name, header) in &map.pairs {
+        let (file_name, Some(unit)) = split_unit(header) else {
+            continue;
+        };
+        let Some(i) = table.index(&file_name) else {
+            continue;
+        };
+        match &table.units[i] {
+            None => table.units[i] = Some(unit),
+            Some(own) if own.eq_ignore_ascii_case(&unit) => {}
+            Some(own) => {
+                return Err((
+                    header_line,
+                    format!("--columns {name}={header}: the file's header gives `{file_name}[{own}]`; give the unit once"),
+                ))
+            }
+        }
+    }
     // Each file column goes to the record once, moved rather than copied, unless a map gives
     // it to two record columns.
     let sources: Vec<Option<usize>> = COLUMNS.iter().map(|name| find(&table, name)).collect();

@@ -118,3 +118,63 @@ fn a_decimal_comma_in_a_comma_separated_file_is_still_an_error_naming_the_line()
         stderr(&out)
     );
 }
+
+/// `--columns` gives a file's own names and, where its header has none, their units: a
+/// record whose time is in ms and speed in rpm under bare names identifies as the SI file.
+#[test]
+fn columns_map_a_tools_own_names_and_units() {
+    let dir = scratch("input-dialects-columns");
+    let [high, low] = small_servo_steps(&dir, None);
+    let plain = parameters(&high, &low);
+    let rpm = 60.0 / std::f64::consts::TAU;
+    let [h, l] = [&high, &low].map(|src| {
+        let file = Path::new(src).file_name().unwrap().to_str().unwrap();
+        rewrite(
+            src,
+            &dir.as_ref().join(format!("tool-{file}")),
+            |_| "time_ms,u,i,speed_rpm,pos".to_string(),
+            |_, r| {
+                let v: Vec<f64> = r.split(',').map(|x| x.parse().unwrap()).collect();
+                format!("{},{},{},{},{}", v[0] * 1e3, v[1], v[2], v[3] * rpm, v[4])
+            },
+        )
+    });
+    let map = "t=time_ms[ms],voltage=u,current=i,speed=speed_rpm[rpm],position=pos";
+    let out = motorid(&[
+        "identify",
+        "--high",
+        &h,
+        "--low",
+        &l,
+        "--columns",
+        map,
+        "--json",
+        "--quiet",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let mapped: Value = serde_json::from_str(&stdout(&out)).unwrap();
+    for name in ["R", "L", "k", "f", "J", "Ts"] {
+        let (a, b) = (
+            mapped["parameters"][name]["value"].as_f64().unwrap(),
+            plain[name]["value"].as_f64().unwrap(),
+        );
+        // Unit conversions round the data at 1e-16: the fit moves far less than 1e-9.
+        assert!((a / b - 1.0).abs() < 1e-9, "{name}: {a} against {b}");
+    }
+    // A unit that contradicts the file's own header is refused, naming both.
+    let out = motorid(&[
+        "identify",
+        "--high",
+        &high,
+        "--low",
+        &low,
+        "--columns",
+        "speed=speed[rpm]",
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("--columns speed=speed[rpm]: the file's header gives `speed[rad/s]`"),
+        "{}",
+        stderr(&out)
+    );
+}
