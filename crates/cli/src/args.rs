@@ -98,7 +98,7 @@ pub struct DiagnoseArgs {
     #[arg(long)]
     pub json: bool,
     /// No progress on standard error.
-    #[arg(long)]
+    #[arg(long, short = 'q')]
     pub quiet: bool,
 }
 
@@ -200,6 +200,10 @@ pub struct EmpsArgs {
     /// Print one JSON object instead of the report.
     #[arg(long)]
     pub json: bool,
+    /// Accepted as on every command; this one writes nothing on standard error but errors.
+    #[arg(long, short = 'q')]
+    #[allow(dead_code)]
+    pub quiet: bool,
 }
 
 #[derive(Debug, Args)]
@@ -258,6 +262,9 @@ pub struct MontecarloArgs {
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// No progress on standard error (errors are still reported).
+    #[arg(long, short = 'q')]
+    pub quiet: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -395,6 +402,10 @@ pub struct ModelArgs {
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// Accepted as on every command; this one writes nothing on standard error but errors.
+    #[arg(long, short = 'q')]
+    #[allow(dead_code)]
+    pub quiet: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -508,4 +519,8 @@ pub struct DemoArgs {
     /// Also write the two simulated records (40 V and 2.5 V) into this folder.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Accepted as on every command; this one writes nothing on standard error but errors.
+    #[arg(long, short = 'q')]
+    #[allow(dead_code)]
+    pub quiet: bool,
 }

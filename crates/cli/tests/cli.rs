@@ -1037,3 +1037,32 @@ fn emps_pulses_show_where_the_model_disagrees() {
         "{est} {val_with} {val_without}"
     );
 }
+
+/// `-q`/`--quiet` is accepted by every command, and silences the progress of those that
+/// report it (a Monte Carlo study's counter).
+#[test]
+fn every_command_takes_quiet() {
+    for command in [
+        "model",
+        "simulate",
+        "identify",
+        "demo",
+        "montecarlo",
+        "fleet",
+        "emulate",
+        "acquire",
+        "emps",
+        "diagnose",
+    ] {
+        let out = motorid(&[command, "--help"]);
+        assert!(
+            stdout(&out).contains("-q, --quiet"),
+            "{command} --help lists no -q, --quiet"
+        );
+    }
+    let out = motorid(&["model", "-q"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = motorid(&["montecarlo", "--runs", "2", "--duration", "5", "-q"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(stderr(&out), "", "montecarlo -q wrote to standard error");
+}

@@ -68,6 +68,8 @@ pub struct Settings {
     runs: usize,
     /// One JSON object instead of the table.
     json: bool,
+    /// No progress on standard error.
+    quiet: bool,
 }
 
 fn one_run(study: &Settings, i: usize) -> Result<Run> {
@@ -232,6 +234,7 @@ impl Settings {
             seed: a.seed,
             runs: a.runs,
             json: a.json,
+            quiet: a.quiet,
         })
     }
 }
@@ -243,7 +246,7 @@ pub fn run(study: &Settings) -> Result<()> {
     let started = std::time::Instant::now();
     let identified = AtomicUsize::new(0);
     let failed = AtomicUsize::new(0);
-    let progress = Jobs::new(study.runs, "record pairs done", study.json);
+    let progress = Jobs::new(study.runs, "record pairs done", study.json || study.quiet);
     let results = crate::parallel::map(
         study.runs,
         |i| {
