@@ -64,7 +64,9 @@ pub struct DiagnoseArgs {
     /// records that are held out in any case (repeatable).
     #[arg(long = "validate", value_name = "FILE.csv")]
     pub validate: Vec<PathBuf>,
-    /// Candidate effects, comma-separated (default: all seven of SPEC section 5).
+    /// Candidate effects, comma-separated (default: all seven: stribeck_friction,
+    /// cogging_torque, current_sensor_lag, thermal_drift, quadratic_drag, brush_drop,
+    /// inductance_saturation).
     #[arg(long, value_name = "NAME,...", value_delimiter = ',')]
     pub candidates: Vec<String>,
     /// Effects named at most, one on top of the other.
@@ -190,9 +192,11 @@ pub struct FleetArgs {
 
 #[derive(Debug, Args)]
 pub struct EmpsArgs {
-    /// Folder holding DATA_EMPS.csv and DATA_EMPS_PULSES.csv.
-    #[arg(long, value_name = "DIR", default_value = "../shared/real-data/emps")]
-    pub dir: PathBuf,
+    /// Folder holding DATA_EMPS.csv and DATA_EMPS_PULSES.csv (default: shared/real-data/emps
+    /// beside the repository, found from the working folder or from the source tree this
+    /// binary was built in).
+    #[arg(long, value_name = "DIR")]
+    pub dir: Option<PathBuf>,
     /// Write the figure emps_pulses.svg (position error with and without the pulses in the
     /// model, above the pulse force) into this folder.
     #[arg(long, value_name = "DIR")]
@@ -477,7 +481,8 @@ pub struct SimulateArgs {
     pub effects: Vec<String>,
     #[command(flatten)]
     pub measurement: MeasurementArgs,
-    /// Output CSV (record format of SPEC section 4); `-` or absent: standard output.
+    /// Output CSV (t[s],voltage[V],current[A],speed[rad/s],position[rad] after `#` metadata
+    /// lines); `-` or absent: standard output.
     #[arg(short = 'o', long = "output", value_name = "FILE.csv")]
     pub output: Option<PathBuf>,
     /// No progress or summary on standard error (errors are still reported).

@@ -1066,3 +1066,26 @@ fn every_command_takes_quiet() {
     assert!(out.status.success(), "{}", stderr(&out));
     assert_eq!(stderr(&out), "", "montecarlo -q wrote to standard error");
 }
+
+/// `motorid emps` without `--dir` finds the shared EMPS data from any working folder (it ran
+/// only from the repository's root), and says which file it read.
+#[test]
+fn emps_finds_its_data_from_any_folder() {
+    let data = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/real-data/emps/DATA_EMPS.csv"
+    );
+    if !std::path::Path::new(data).exists() {
+        eprintln!("skipped: {data} is not on this machine");
+        return;
+    }
+    let elsewhere = scratch("emps-cwd");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_motorid"))
+        .args(["emps", "--json"])
+        .current_dir(&elsewhere)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let json: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
+    assert!(json.is_object(), "{json}");
+}

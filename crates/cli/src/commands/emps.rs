@@ -63,11 +63,25 @@ pub struct Settings {
     pub json: bool,
 }
 
+/// The EMPS folder when `--dir` is not given: `../shared/real-data/emps` from the working
+/// folder (the repository's root) if it is there, else the same folder beside the source tree
+/// this binary was built in, so that `motorid emps` runs from any folder of a checkout.
+fn default_dir() -> std::path::PathBuf {
+    let from_cwd = std::path::PathBuf::from("../shared/real-data/emps");
+    let from_source =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/real-data/emps");
+    if from_cwd.join("DATA_EMPS.csv").is_file() || !from_source.join("DATA_EMPS.csv").is_file() {
+        from_cwd
+    } else {
+        from_source
+    }
+}
+
 impl Settings {
     /// The options of `a` (paths are checked when they are read).
     pub fn from_args(a: &EmpsArgs) -> Settings {
         Settings {
-            dir: a.dir.clone(),
+            dir: a.dir.clone().unwrap_or_else(default_dir),
             plot: a.plot.clone(),
             json: a.json,
         }

@@ -148,7 +148,7 @@ impl Settings {
             }
         } else {
             return Err(BadInput(
-                "give --high HV.csv --low LV.csv (step records), or --steady FILE.csv ...".into(),
+                "give the records: --high HV.csv --low LV.csv (a step pair), --record FILE.csv (any voltage waveform, repeatable; with --input current, a current-driven axis), --steady FILE.csv (steady tests), or --batch DIR (a fleet)".into(),
             )
             .into());
         };
