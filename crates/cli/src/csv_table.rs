@@ -288,6 +288,12 @@ impl TableParser {
         newline: bool,
     ) -> std::result::Result<(), (usize, String)> {
         let line_no = self.line_no;
+        if line_no == 1 && (bytes.starts_with(&[0xFF, 0xFE]) || bytes.starts_with(&[0xFE, 0xFF])) {
+            return Err((
+                line_no,
+                "UTF-16 text (it starts with a UTF-16 byte-order mark): save the file as UTF-8 (in Excel: CSV UTF-8; or iconv -f UTF-16 -t UTF-8)".to_string(),
+            ));
+        }
         if let Some(i) = bytes.iter().position(|&b| b == 0) {
             return Err((
                 line_no,

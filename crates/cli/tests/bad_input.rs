@@ -160,6 +160,11 @@ fn broken_files_give_one_line_errors_naming_file_and_line() {
             ":1: not UTF-8 text",
         ),
         (
+            "utf16.csv",
+            b"\xff\xfet\0,\0v\0o\0l\0t\0a\0g\0e\0\n\0".to_vec(),
+            ":1: UTF-16 text",
+        ),
+        (
             "binary.png",
             b"\x89PNG\r\n\x1a\n\0\0\0\rIHDR".to_vec(),
             ":1: not UTF-8 text",
