@@ -39,6 +39,20 @@ fn rewrite(
     dst.to_str().unwrap().to_string()
 }
 
+/// [`rewrite`] of both records of a pair into `dir`, each named `{prefix}-{its name}`.
+fn rewrite_pair(
+    dir: &Path,
+    pair: [&str; 2],
+    prefix: &str,
+    header: impl Fn(&str) -> String,
+    row: impl Fn(usize, &str) -> String,
+) -> [String; 2] {
+    pair.map(|src| {
+        let file = Path::new(src).file_name().unwrap().to_str().unwrap();
+        rewrite(src, &dir.join(format!("{prefix}-{file}")), &header, &row)
+    })
+}
+
 /// The identified parameters of a step pair (`parameters` of `identify --json`).
 fn parameters(high: &str, low: &str) -> Value {
     let out = motorid(&[
@@ -80,15 +94,7 @@ fn records_as_spreadsheets_and_data_tools_write_them_identify_as_the_plain_csv()
         ),
     ];
     for (name, header, row) in dialects {
-        let [h, l] = [&high, &low].map(|src| {
-            let file = Path::new(src).file_name().unwrap().to_str().unwrap();
-            rewrite(
-                src,
-                &dir.as_ref().join(format!("{name}-{file}")),
-                header,
-                row,
-            )
-        });
+        let [h, l] = rewrite_pair(dir.as_ref(), [&high, &low], name, header, row);
         assert_ne!(
             std::fs::read_to_string(&h).unwrap(),
             std::fs::read_to_string(&high).unwrap(),
@@ -127,18 +133,16 @@ fn columns_map_a_tools_own_names_and_units() {
     let [high, low] = small_servo_steps(&dir, None);
     let plain = parameters(&high, &low);
     let rpm = 60.0 / std::f64::consts::TAU;
-    let [h, l] = [&high, &low].map(|src| {
-        let file = Path::new(src).file_name().unwrap().to_str().unwrap();
-        rewrite(
-            src,
-            &dir.as_ref().join(format!("tool-{file}")),
-            |_| "time_ms,u,i,speed_rpm,pos".to_string(),
-            |_, r| {
-                let v: Vec<f64> = r.split(',').map(|x| x.parse().unwrap()).collect();
-                format!("{},{},{},{},{}", v[0] * 1e3, v[1], v[2], v[3] * rpm, v[4])
-            },
-        )
-    });
+    let [h, l] = rewrite_pair(
+        dir.as_ref(),
+        [&high, &low],
+        "tool",
+        |_| "time_ms,u,i,speed_rpm,pos".to_string(),
+        |_, r| {
+            let v: Vec<f64> = r.split(',').map(|x| x.parse().unwrap()).collect();
+            format!("{},{},{},{},{}", v[0] * 1e3, v[1], v[2], v[3] * rpm, v[4])
+        },
+    );
     let map = "t=time_ms[ms],voltage=u,current=i,speed=speed_rpm[rpm],position=pos";
     let out = motorid(&[
         "identify",
@@ -188,23 +192,21 @@ fn unix_time_stamps_identify_as_stamps_from_zero() {
     let dir = scratch("input-dialects-unix");
     let [high, low] = small_servo_steps(&dir, None);
     let plain = parameters(&high, &low);
-    let [h, l] = [&high, &low].map(|src| {
-        let file = Path::new(src).file_name().unwrap().to_str().unwrap();
-        rewrite(
-            src,
-            &dir.as_ref().join(format!("unix-{file}")),
-            |h| h.to_string(),
-            |_, r| {
-                let (t, rest) = r.split_once(',').unwrap();
-                let us = (t.parse::<f64>().unwrap() * 1e6).round() as u64;
-                format!(
-                    "{}.{:06},{rest}",
-                    1_733_587_200 + us / 1_000_000,
-                    us % 1_000_000
-                )
-            },
-        )
-    });
+    let [h, l] = rewrite_pair(
+        dir.as_ref(),
+        [&high, &low],
+        "unix",
+        |h| h.to_string(),
+        |_, r| {
+            let (t, rest) = r.split_once(',').unwrap();
+            let us = (t.parse::<f64>().unwrap() * 1e6).round() as u64;
+            format!(
+                "{}.{:06},{rest}",
+                1_733_587_200 + us / 1_000_000,
+                us % 1_000_000
+            )
+        },
+    );
     let unix = parameters(&h, &l);
     for name in ["R", "L", "k", "f", "J", "Ts"] {
         let (a, b) = (
