@@ -7,14 +7,14 @@ use std::path::Path;
 use anyhow::Result;
 use fit::{
     current_adc_steps, detect_initial_state, detect_rest, equation_error_start_with_initial_states,
-    identify_feedforward, identify_output_error_with_friction_restarts, identify_step_pair,
-    judge_clipping, locate_step_with, record_speed, voltage_input, voltage_levels, AxisRecord,
-    ClippingVerdict, CurrentChannel, DetectedInitialState, ExcitedRecord, FeedforwardFit,
-    FeedforwardSettings, FullFit, InitialState, LevelPrior, LmSettings, MeasuredChannels,
-    RecordChannel, SpeedRecord, StartChannels, StepInputs, StepMethod, StepPairIdentification,
-    StepRecord, StepTest, WholeRecord,
+    identify_feedforward, identify_step_pair, judge_clipping, locate_step_with, record_speed,
+    voltage_input, voltage_levels, AxisRecord, ClippingVerdict, CurrentChannel,
+    DetectedInitialState, ExcitedRecord, FeedforwardFit, FeedforwardSettings, FullFit,
+    InitialState, LevelPrior, LmSettings, MeasuredChannels, OutputError, RecordChannel,
+    SpeedRecord, StartChannels, StepInputs, StepMethod, StepPairIdentification, StepRecord,
+    StepTest, WholeRecord,
 };
-use motor_model::{Effects, Input, MotorParams, Record};
+use motor_model::{Input, MotorParams, Record};
 
 use crate::errors::{BadInput, NotConverged};
 use crate::record_csv::{read_loaded, ColumnMap, Loaded};
@@ -628,15 +628,11 @@ pub fn fit_excited_from(
             .map_err(|e| BadInput(format!("{label}: {e}{start_hint}")))?,
     };
     let priors: Vec<Vec<LevelPrior>> = loaded.iter().map(|l| l.priors.clone()).collect();
-    let (start, full) = identify_output_error_with_friction_restarts(
-        &records,
-        &priors,
-        &states,
-        &start,
-        &Effects::none(),
-        LmSettings::default(),
-    )
-    .map_err(|e| fit_error(label, &e))?;
+    let (start, full) = OutputError::new(&records, start)
+        .level_priors(&priors)
+        .initial_states(&states)
+        .fit_with_friction_restart()
+        .map_err(|e| fit_error(label, &e))?;
     Ok(ExcitedFit {
         start,
         full,

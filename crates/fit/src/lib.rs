@@ -5,13 +5,16 @@
 //! - [`fit_33`]: the fit of the paper's Eq. (33) to a normalised high-voltage current.
 //! - [`uncertainty`]: covariance, 95 % intervals (Student t, as MATLAB's `nlparci`) and
 //!   correlations; [`student_t_quantile`].
-//! - [`identify_full_with_inputs`], [`identify_output_error_with_inputs`]: the step heights,
+//! - [`OutputError`]: R, L, k, f, J, Ts (and any effects') from records of any voltage
+//!   waveform, by output error through the stick-slip simulator; one settings value for all
+//!   that is known of the records.
+//! - [`identify_full_with_inputs`], [`OutputError::level_priors`]: the step heights,
 //!   levels and instants as measured inputs whose uncertainty enters the intervals
 //!   ([`estimate_level`], [`StepInputs`], [`LevelPrior`]).
-//! - [`identify_output_error_with_initial_states`]: records that do not start at rest, each
+//! - [`OutputError::initial_states`]: records that do not start at rest, each
 //!   started at rest, in the steady state of its first level (Eqs. (4), (5)) or from a free
 //!   initial current and speed ([`InitialState`], [`detect_initial_state`]).
-//! - [`identify_output_error_with_effects`]: the motor's six parameters and those of a set of
+//! - [`OutputError::effects`]: the motor's six parameters and those of a set of
 //!   unmodelled effects (SPEC section 5) in one output-error fit, each named with its unit and
 //!   interval ([`EffectEstimate`]); every fit returns its fitted traces ([`FittedChannel`]).
 //!
@@ -85,12 +88,7 @@ pub use excitation::initial_state::{
 pub use excitation::input_uncertainty::{
     estimate_level, quantisation_bias_variance, LevelEstimate, LevelPrior, StepInputs, VoltageScale,
 };
-pub use excitation::output_error::{
-    identify_output_error, identify_output_error_with_effects,
-    identify_output_error_with_friction_restarts, identify_output_error_with_initial_states,
-    identify_output_error_with_inputs, identify_output_error_with_inputs_and_effects,
-    predict_output_error,
-};
+pub use excitation::output_error::{predict_output_error, OutputError};
 pub use excitation::voltage::{voltage_input, voltage_levels};
 pub use steps::full_model::{identify_full, identify_full_with_inputs};
 pub use steps::model33::{fit_33, Fit33, Params33, Record33};

@@ -4,10 +4,7 @@
 //! holds the truth, and the model with the effect explains the records better than the nominal
 //! model does.
 
-use fit::{
-    identify_output_error, identify_output_error_with_effects, voltage_input, ExcitedRecord,
-    FullFit, LmSettings,
-};
+use fit::{voltage_input, ExcitedRecord, FullFit, OutputError};
 use motor_model::{
     simulate, Effect, Effects, Input, MeasurementModel, MotorParams, Range, Record, SpeedSource,
 };
@@ -103,9 +100,10 @@ fn fit_with(effect: &str, seed: u64) {
                 .collect::<Vec<_>>(),
         )
         .unwrap();
-    let fit =
-        identify_output_error_with_effects(&excited, &start, &start_effects, LmSettings::default())
-            .unwrap();
+    let fit = OutputError::new(&excited, start)
+        .effects(start_effects)
+        .fit()
+        .unwrap();
     assert!(fit.accepted(), "{}: {:?}", effect.name(), fit.failure());
     let names = fit.parameter_names();
     assert_eq!(names.len(), 6 + effects.fitted_slots().len());
@@ -147,7 +145,7 @@ fn fit_with(effect: &str, seed: u64) {
         fit.effects.fitted_values().len(),
         fit.effect_estimates.len()
     );
-    let nominal = identify_output_error(&excited, &start, LmSettings::default()).unwrap();
+    let nominal = OutputError::new(&excited, start).fit().unwrap();
     let (with, without) = (nrmse(&fit), nrmse(&nominal));
     eprintln!(
         "{}: NRMSE {with:.5} with the effect, {without:.5} without",
@@ -197,14 +195,11 @@ fn motor_and_effect_with_uncertain_levels() {
     let priors: Vec<Vec<fit::LevelPrior>> = levels.iter().map(|(_, p)| p.clone()).collect();
     let start = MotorParams::from_values(truth.values().map(|v| v * 1.2)).unwrap();
     let start_effects = effects.with_fitted_values(&[6e-8]).unwrap();
-    let fit = fit::identify_output_error_with_inputs_and_effects(
-        &excited,
-        &priors,
-        &start,
-        &start_effects,
-        LmSettings::default(),
-    )
-    .unwrap();
+    let fit = fit::OutputError::new(&excited, start)
+        .level_priors(&priors)
+        .effects(start_effects)
+        .fit()
+        .unwrap();
     assert!(fit.accepted(), "{:?}", fit.failure());
     let names = fit.parameter_names();
     let ci = fit.ci95.unwrap().named().map(|(_, c)| c);

@@ -6,9 +6,8 @@ mod common;
 use common::excited;
 
 use fit::{
-    detect_initial_state, equation_error_start_with_initial_states,
-    identify_output_error_with_initial_states, voltage_levels, FullFit, InitialState, LmSettings,
-    PARAM_NAMES,
+    detect_initial_state, equation_error_start_with_initial_states, voltage_levels, FullFit,
+    InitialState, OutputError, PARAM_NAMES,
 };
 use motor_model::{Effects, Input, MeasurementModel, MotorParams, Record, Simulator, Trace};
 
@@ -92,14 +91,10 @@ fn fit_from(rec: &Record, state: InitialState) -> Result<FullFit, fit::FitError>
     let records = [excited(rec, &input)];
     let initial = [state];
     let start = equation_error_start_with_initial_states(&records, &initial)?;
-    identify_output_error_with_initial_states(
-        &records,
-        &[priors],
-        &initial,
-        &start,
-        &Effects::none(),
-        LmSettings::default(),
-    )
+    OutputError::new(&records, start)
+        .level_priors(&[priors])
+        .initial_states(&initial)
+        .fit()
 }
 
 /// [`fit_from`] the initial state `rec` shows, which must be `want`.

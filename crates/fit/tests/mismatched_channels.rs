@@ -12,13 +12,11 @@ use fit::{
     check_step_test, detect_initial_state, electrical_equation, encoder_speed,
     equation_error_start, equation_error_start_with_initial_states, fit_33, identify_feedforward,
     identify_full, identify_full_with_inputs, identify_inverse_model,
-    identify_inverse_model_pooled, identify_output_error, identify_output_error_with_effects,
-    identify_output_error_with_initial_states, identify_output_error_with_inputs,
-    identify_output_error_with_inputs_and_effects, identify_paper, identify_step_pair, locate_step,
+    identify_inverse_model_pooled, identify_paper, identify_step_pair, locate_step,
     locate_step_with, predict_output_error, record_speed, speed_check_c8, steady_state_start,
     torque_constant, voltage_input, voltage_levels, AxisRecord, Channel, ExcitedRecord,
-    FeedforwardSettings, InitialState, InverseModelSettings, LmSettings, Params33, Record33,
-    SpeedRecord, StepInputs, StepMethod, StepRecord, StepTest,
+    FeedforwardSettings, InitialState, InverseModelSettings, LmSettings, OutputError, Params33,
+    Record33, SpeedRecord, StepInputs, StepMethod, StepRecord, StepTest,
 };
 use motor_model::{Effects, Input, MotorParams, MotorState, StepResponse};
 use proptest::prelude::*;
@@ -112,7 +110,7 @@ proptest! {
         let oe = [
             electrical_equation(&[record], 0.1).err().map(|e| e.to_string()),
             equation_error_start(&[record]).err().map(|e| e.to_string()),
-            identify_output_error(&[record], &start, settings).err().map(|e| e.to_string()),
+            OutputError::new(&[record], start).solver(settings).fit().err().map(|e| e.to_string()),
         ];
         if used_misaligned {
             for r in &oe {
@@ -213,10 +211,10 @@ proptest! {
         prop_assert!(identify_full_with_inputs(&[test], &[StepInputs::default()], &start, settings).is_err());
         prop_assert!(detect_initial_state(&record).is_err());
         prop_assert!(equation_error_start_with_initial_states(&[record], &[InitialState::Rest]).is_err());
-        prop_assert!(identify_output_error_with_effects(&[record], &start, &none, settings).is_err());
-        prop_assert!(identify_output_error_with_inputs(&[record], &[Vec::new()], &start, settings).is_err());
-        prop_assert!(identify_output_error_with_inputs_and_effects(&[record], &[Vec::new()], &start, &none, settings).is_err());
-        prop_assert!(identify_output_error_with_initial_states(&[record], &[], &[InitialState::Free], &start, &none, settings).is_err());
+        prop_assert!(OutputError::new(&[record], start).effects(none).solver(settings).fit().is_err());
+        prop_assert!(OutputError::new(&[record], start).level_priors(&[Vec::new()]).solver(settings).fit().is_err());
+        prop_assert!(OutputError::new(&[record], start).level_priors(&[Vec::new()]).effects(none).solver(settings).fit().is_err());
+        prop_assert!(OutputError::new(&[record], start).initial_states(&[InitialState::Free]).effects(none).solver(settings).fit().is_err());
         prop_assert!(predict_output_error(&[record], &start, &none).is_err());
 
         // A column of time beside a voltage of another length.
@@ -274,9 +272,9 @@ proptest! {
         let aligned_test = StepTest { speed: Some(&aligned_speed), position: None, exclude_speed: None, ..test };
         let two_inputs = [StepInputs::default(), StepInputs::default()];
         prop_assert!(identify_full_with_inputs(&[aligned_test], &two_inputs, &start, settings).is_err());
-        prop_assert!(identify_output_error_with_inputs(&[aligned], &[Vec::new(), Vec::new()], &start, settings).is_err());
+        prop_assert!(OutputError::new(&[aligned], start).level_priors(&[Vec::new(), Vec::new()]).solver(settings).fit().is_err());
         let two_states = [InitialState::Rest, InitialState::Rest];
         prop_assert!(equation_error_start_with_initial_states(&[aligned], &two_states).is_err());
-        prop_assert!(identify_output_error_with_initial_states(&[aligned], &[], &two_states, &start, &none, settings).is_err());
+        prop_assert!(OutputError::new(&[aligned], start).initial_states(&two_states).effects(none).solver(settings).fit().is_err());
     }
 }

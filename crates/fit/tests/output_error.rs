@@ -4,10 +4,7 @@ mod common;
 
 use common::excited;
 
-use fit::{
-    equation_error_start, identify_output_error, voltage_input, ExcitedRecord, LmSettings,
-    PARAM_NAMES,
-};
+use fit::{equation_error_start, voltage_input, ExcitedRecord, OutputError, PARAM_NAMES};
 use motor_model::{Effects, Input, MeasurementModel, MotorParams, Record, Simulator, SpeedSource};
 
 /// The paper's logger: 10-bit ADC over ranges covering the signals, 1 LSB of noise, a
@@ -46,7 +43,7 @@ fn staircase_with_noise_identifies_all_six_parameters_within_their_intervals() {
     }
     let records = [excited(&rec, &input)];
     let start = equation_error_start(&records).unwrap();
-    let fit = identify_output_error(&records, &start, LmSettings::default()).unwrap();
+    let fit = OutputError::new(&records, start).fit().unwrap();
     assert!(fit.termination.converged(), "{:?}", fit.termination);
     let ci = fit.ci95.expect("intervals").named().map(|(_, c)| c);
     for (k, (&got, want)) in fit.params.values().iter().zip(truth.values()).enumerate() {
@@ -104,7 +101,7 @@ fn exact_sine_and_prbs_records_give_back_the_motor() {
         })
         .collect();
     let start = MotorParams::from_values(truth.values().map(|v| v * 1.2)).unwrap();
-    let fit = identify_output_error(&records, &start, LmSettings::default()).unwrap();
+    let fit = OutputError::new(&records, start).fit().unwrap();
     assert!(fit.termination.converged(), "{:?}", fit.termination);
     for (k, (&got, want)) in fit.params.values().iter().zip(truth.values()).enumerate() {
         // The sine is replayed by linear interpolation between 5 ms samples.

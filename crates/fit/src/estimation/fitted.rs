@@ -49,7 +49,7 @@ pub struct FullFit {
     /// Final weighted cost `½ Σ r²`.
     pub cost: f64,
     /// Each record's initial state as fitted, in record order, for an output-error fit
-    /// ([`crate::identify_output_error_with_initial_states`]); empty for the step fits (every
+    /// ([`crate::OutputError::initial_states`]); empty for the step fits (every
     /// step starts at rest).
     pub initial_states: Vec<FittedInitialState>,
     /// The solution in the fit's coordinates (`θ`, see `parameters.rs`).

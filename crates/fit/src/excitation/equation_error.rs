@@ -23,7 +23,7 @@ pub(crate) const START_STEP_FACTOR: f64 = 8.0;
 /// Cut-offs tried by [`equation_error_start`], as fractions of the sample rate.
 pub(crate) const START_CUTOFFS: [f64; 4] = [0.1, 0.02, 0.004, 0.0008];
 
-/// A start for [`identify_output_error`](crate::identify_output_error) by equation error: the measured signals, low-passed
+/// A start for [`OutputError`](crate::OutputError) by equation error: the measured signals, low-passed
 /// forward and backward (zero phase, 4th-order Butterworth), are put into the model's
 /// equations, which are linear in the parameters: Eq. (2a) `E = R I + L dI/dt + k Ω` gives R, L,
 /// k by least squares over every sample, and Eq. (2b) `k I = J dΩ/dt + f Ω + Ts sign Ω` the
@@ -41,7 +41,7 @@ pub fn equation_error_start(records: &[ExcitedRecord<'_>]) -> Result<MotorParams
 }
 
 /// [`equation_error_start`] for records whose simulations start from `initial` (as in
-/// [`identify_output_error_with_initial_states`](crate::identify_output_error_with_initial_states)): the cut-off is chosen on the output-error
+/// [`OutputError::initial_states`](crate::OutputError::initial_states)): the cut-off is chosen on the output-error
 /// cost of those simulations, free states at the records' first samples.
 pub fn equation_error_start_with_initial_states(
     records: &[ExcitedRecord<'_>],

@@ -32,7 +32,7 @@ use crate::excitation::voltage::bad;
 
 /// The model's channels on every sample of `records` — the samples an exclusion mask leaves out
 /// of a fit too — for `motor` with `effects`: what a fit is judged against on data it did not
-/// see (held-out records or blocks). Channels as in [`identify_output_error`]; each
+/// see (held-out records or blocks). Channels as in [`OutputError`]; each
 /// [`FittedChannel::samples`] lists every sample.
 pub fn predict_output_error(
     records: &[ExcitedRecord<'_>],
@@ -94,7 +94,7 @@ pub(crate) struct Sensitivity {
 }
 
 /// The residuals of `records` for `motor` with `effects` and their Jacobian in θ (the
-/// coordinates of [`identify_output_error_with_effects`]): every column, or with `of` only the
+/// coordinates of [`OutputError::effects`]): every column, or with `of` only the
 /// columns of that effect's fitted parameters. Each channel is weighted by its σ in `sigmas`
 /// (`(record, channel, σ)`, the channel's own scatter where missing). The RK4 step is the one
 /// a fit from this point with `step_factor` would take ([`Simulator::with_step_factor`]).
@@ -146,149 +146,166 @@ pub(crate) fn output_error_sensitivity(
     })
 }
 
-/// Identifies R, L, k, f, J, Ts from records of any voltage waveform (output error through
-/// the stick-slip simulator), starting from `start` (e.g. [`equation_error_start`](crate::equation_error_start)).
-pub fn identify_output_error(
-    records: &[ExcitedRecord<'_>],
-    start: &MotorParams,
+/// An output-error identification: R, L, k, f, J, Ts (and the fitted parameters of any
+/// effects switched on) from records of any voltage waveform, each simulated from its voltage
+/// by the stick-slip simulator and fitted on every channel it measured. One way in, set up by
+/// what is known of the records:
+///
+/// ```no_run
+/// # fn demo(records: &[fit::ExcitedRecord<'_>]) -> Result<(), fit::FitError> {
+/// let start = fit::equation_error_start(records)?;
+/// let fit = fit::OutputError::new(records, start).fit()?;
+/// # Ok(()) }
+/// ```
+///
+/// - [`OutputError::effects`]: the motor fitted jointly with a set of effects: one fit of
+///   `θ = [ln R, ln L, ln k, ln f, ln J, ln Ts, θ_e…]`, the effects' fitted parameters
+///   ([`Effects::fitted_slots`]) each in its unconstrained coordinate
+///   ([`motor_model::ParamSpec::to_unconstrained`]; Stribeck's Tst as `ln(Tst − Ts)`), started
+///   from the values given. The simulation runs on a fixed RK4 step and (with cogging) a speed
+///   bound 1.5 times the largest measured speed, so that it is smooth in θ. The results name
+///   every parameter: [`FullFit::effects`], [`FullFit::effect_estimates`] (value, standard
+///   error and 95 % interval in SI units by the delta method through each transform),
+///   [`FullFit::parameter_names`] for the rows of [`FullFit::correlation`].
+/// - [`OutputError::level_priors`]: what each record leaves unknown about its voltage levels
+///   (one list per record, from [`voltage_levels`](crate::voltage_levels), a prior per level of
+///   its piecewise input): the fit moves the levels and their start instants where the records
+///   put them and widens the intervals by what remains unknown (see [`crate::StepInputs`]).
+/// - [`OutputError::initial_states`]: record `k`'s simulation started from `initial[k]` (all
+///   at rest by default; [`crate::detect_initial_state`] tells which a record shows): at rest,
+///   in the steady state of its first level (Eqs. (4), (5) of the motor being fitted; nominal
+///   model only), or free (its initial current \[A\] and speed \[rad/s\] fitted with the
+///   motor, from its first samples; the motor's intervals are the marginal ones, with that
+///   uncertainty in them). [`FullFit::initial_states`] gives each record's state as fitted.
+/// - [`OutputError::solver`]: the Levenberg–Marquardt settings.
+///
+/// [`OutputError::fit`] fits from the start given;
+/// [`OutputError::fit_with_friction_restart`] tries once more from another start where the
+/// friction vanished.
+#[derive(Debug, Clone)]
+pub struct OutputError<'a> {
+    records: &'a [ExcitedRecord<'a>],
+    start: MotorParams,
+    priors: &'a [Vec<LevelPrior>],
+    initial: &'a [InitialState],
+    effects: Effects,
     settings: LmSettings,
-) -> Result<FullFit, FitError> {
-    identify_output_error_with_inputs_and_effects(records, &[], start, &Effects::none(), settings)
 }
 
-/// [`identify_output_error`] of the motor with `effects` switched on: one fit of
-/// `θ = [ln R, ln L, ln k, ln f, ln J, ln Ts, θ_e…]`, the six motor parameters and the fitted
-/// parameters of the effects ([`Effects::fitted_slots`], each in its unconstrained coordinate,
-/// [`motor_model::ParamSpec::to_unconstrained`]; Stribeck's Tst as `ln(Tst − Ts)`), started
-/// from `start` and the values in `effects`. The simulation is the stick-slip simulator with
-/// those effects, on a fixed RK4 step and (with cogging) a speed bound 1.5 times the largest
-/// measured speed, so that it is smooth in θ. The results name every parameter:
-/// [`FullFit::effects`], [`FullFit::effect_estimates`] (value, standard error and 95 %
-/// interval in SI units by the delta method through each transform),
-/// [`FullFit::parameter_names`] for the rows of [`FullFit::correlation`].
-pub fn identify_output_error_with_effects(
-    records: &[ExcitedRecord<'_>],
-    start: &MotorParams,
-    effects: &Effects,
-    settings: LmSettings,
-) -> Result<FullFit, FitError> {
-    identify_output_error_with_inputs_and_effects(records, &[], start, effects, settings)
-}
+impl<'a> OutputError<'a> {
+    /// The identification of `records` from `start` (e.g. [`equation_error_start`](crate::equation_error_start)):
+    /// the nominal motor, every record at rest at its first sample, its voltage levels as
+    /// measured, the solver's default settings.
+    pub fn new(records: &'a [ExcitedRecord<'a>], start: MotorParams) -> Self {
+        OutputError {
+            records,
+            start,
+            priors: &[],
+            initial: &[],
+            effects: Effects::none(),
+            settings: LmSettings::default(),
+        }
+    }
 
-/// [`identify_output_error`] with what each record leaves unknown about its voltage levels
-/// (`priors[k]` for record `k`, from [`voltage_levels`](crate::voltage_levels), one per level of its piecewise input;
-/// or no priors at all): the fit moves the levels and their start instants where the records
-/// put them and widens the intervals by what remains unknown (see [`crate::StepInputs`]).
-pub fn identify_output_error_with_inputs(
-    records: &[ExcitedRecord<'_>],
-    priors: &[Vec<LevelPrior>],
-    start: &MotorParams,
-    settings: LmSettings,
-) -> Result<FullFit, FitError> {
-    identify_output_error_with_inputs_and_effects(
-        records,
-        priors,
-        start,
-        &Effects::none(),
-        settings,
-    )
-}
+    /// The motor with `effects` switched on, their fitted parameters started from the values
+    /// in `effects`.
+    pub fn effects(mut self, effects: Effects) -> Self {
+        self.effects = effects;
+        self
+    }
 
-/// [`identify_output_error_with_inputs`] of the motor with `effects`
-/// (see [`identify_output_error_with_effects`]).
-pub fn identify_output_error_with_inputs_and_effects(
-    records: &[ExcitedRecord<'_>],
-    priors: &[Vec<LevelPrior>],
-    start: &MotorParams,
-    effects: &Effects,
-    settings: LmSettings,
-) -> Result<FullFit, FitError> {
-    identify_output_error_with_initial_states(records, priors, &[], start, effects, settings)
-}
+    /// What each record leaves unknown about its voltage levels: `priors[k]` for record `k`
+    /// (or none at all).
+    pub fn level_priors(mut self, priors: &'a [Vec<LevelPrior>]) -> Self {
+        self.priors = priors;
+        self
+    }
 
-/// [`identify_output_error_with_inputs_and_effects`] with record `k`'s simulation started from
-/// `initial[k]` (all at rest when `initial` is empty; [`crate::detect_initial_state`] tells
-/// which a record shows): at rest, in the steady state of its first level (Eqs. (4), (5) of
-/// the motor being fitted; nominal model only), or free (its initial current \[A\] and speed
-/// \[rad/s\] fitted with the motor, from its first samples; the motor's intervals are the
-/// marginal ones, with that uncertainty in them). [`FullFit::initial_states`] gives each
-/// record's initial state as fitted.
-pub fn identify_output_error_with_initial_states(
-    records: &[ExcitedRecord<'_>],
-    priors: &[Vec<LevelPrior>],
-    initial: &[InitialState],
-    start: &MotorParams,
-    effects: &Effects,
-    settings: LmSettings,
-) -> Result<FullFit, FitError> {
-    fit_output_error(
-        records, priors, initial, start, effects, settings, 1.0, None,
-    )
-}
+    /// Each record's initial state: `initial[k]` for record `k` (or none: all at rest).
+    pub fn initial_states(mut self, initial: &'a [InitialState]) -> Self {
+        self.initial = initial;
+        self
+    }
 
-/// [`identify_output_error_with_initial_states`] from `start`, tried again from another start
-/// where that fit is refused because a friction parameter went to nothing
-/// ([`crate::Refusal::Vanished`]), or so near it that the records no longer determine it
-/// ([`crate::Refusal::Undetermined`] of f or Ts): a start that splits the friction wrongly
-/// between f and Ts can lead the fit into the minimum without one of them. The equation-error
-/// start of a ±12 V PRBS of the small servo (`fixtures/motors/small_servo.json`, 1 s at 2 kHz
-/// through the logger) put f at 2.3 times its value and Ts at a ninth of it, and the fit drove Ts to
-/// 1e-15 N·m on 5 of 6 seeds; from f halved, or from Ts tenfold, it found the motor. The
-/// restart moves the friction towards the vanished parameter: that parameter ten times its
-/// start (at least 1 % and at most half of its scale: the largest motor torque `k·|I|` of the
-/// records for Ts, the electrical damping `k²/R` for f), the other halved. An accepted fit
-/// from there is kept, else the first fit with its refusal. Returns the start of the fit
-/// returned, and the fit; the restart costs one bounded fit.
-pub fn identify_output_error_with_friction_restarts(
-    records: &[ExcitedRecord<'_>],
-    priors: &[Vec<LevelPrior>],
-    initial: &[InitialState],
-    start: &MotorParams,
-    effects: &Effects,
-    settings: LmSettings,
-) -> Result<(MotorParams, FullFit), FitError> {
-    let first = identify_output_error_with_initial_states(
-        records, priors, initial, start, effects, settings,
-    )?;
-    let parameter = match first.refusal {
-        Some(
-            crate::Refusal::Vanished { parameter, .. }
-            | crate::Refusal::Undetermined { parameter, .. },
-        ) if parameter == "Ts" || parameter == "f" => parameter,
-        _ => return Ok((*start, first)),
-    };
-    let peak_current = records
-        .iter()
-        .flat_map(|r| r.current.iter())
-        .fold(0.0_f64, |m, i| m.max(i.abs()));
-    let torque_scale = start.k_nm_per_a * peak_current;
-    let damping_scale = start.k_nm_per_a.powi(2) / start.r_ohm;
-    // One restart: each costs a whole fit, and a second (a hundredfold, quartered) found no
-    // motor the first had missed on the records tried, while it tripled the time of a fit
-    // that is refused anyway (an 85,000-sample record at 100 kHz: 7.6 s → 27.6 s).
-    let tenfold = |value: f64, scale: f64| (10.0 * value).clamp(0.01 * scale, 0.5 * scale);
-    let restart = match parameter {
-        "Ts" if torque_scale > 0.0 => MotorParams {
-            ts_nm: tenfold(start.ts_nm, torque_scale),
-            f_nms_per_rad: 0.5 * start.f_nms_per_rad,
-            ..*start
-        },
-        "f" if damping_scale > 0.0 => MotorParams {
-            f_nms_per_rad: tenfold(start.f_nms_per_rad, damping_scale),
-            ts_nm: 0.5 * start.ts_nm,
-            ..*start
-        },
-        _ => return Ok((*start, first)),
-    };
-    match identify_output_error_with_initial_states(
-        records, priors, initial, &restart, effects, settings,
-    ) {
-        Ok(fit) if fit.accepted() => Ok((restart, fit)),
-        _ => Ok((*start, first)),
+    /// The solver's settings.
+    pub fn solver(mut self, settings: LmSettings) -> Self {
+        self.settings = settings;
+        self
+    }
+
+    /// The fit from the start given.
+    pub fn fit(&self) -> Result<FullFit, FitError> {
+        fit_output_error(
+            self.records,
+            self.priors,
+            self.initial,
+            &self.start,
+            &self.effects,
+            self.settings,
+            1.0,
+            None,
+        )
+    }
+
+    /// [`OutputError::fit`], tried again from another start where that fit is refused because
+    /// a friction parameter went to nothing ([`crate::Refusal::Vanished`]), or so near it that
+    /// the records no longer determine it ([`crate::Refusal::Undetermined`] of f or Ts): a
+    /// start that splits the friction wrongly between f and Ts can lead the fit into the
+    /// minimum without one of them. The equation-error start of a ±12 V PRBS of the small servo
+    /// (`fixtures/motors/small_servo.json`, 1 s at 2 kHz through the logger) put f at 2.3 times
+    /// its value and Ts at a ninth of it, and the fit drove Ts to 1e-15 N·m on 5 of 6 seeds;
+    /// from f halved, or from Ts tenfold, it found the motor. The restart moves the friction
+    /// towards the vanished parameter: that parameter ten times its start (at least 1 % and at
+    /// most half of its scale: the largest motor torque `k·|I|` of the records for Ts, the
+    /// electrical damping `k²/R` for f), the other halved. An accepted fit from there is kept,
+    /// else the first fit with its refusal. Returns the start of the fit returned, and the fit;
+    /// the restart costs one bounded fit.
+    pub fn fit_with_friction_restart(&self) -> Result<(MotorParams, FullFit), FitError> {
+        let (records, start) = (self.records, &self.start);
+        let first = self.fit()?;
+        let parameter = match first.refusal {
+            Some(
+                crate::Refusal::Vanished { parameter, .. }
+                | crate::Refusal::Undetermined { parameter, .. },
+            ) if parameter == "Ts" || parameter == "f" => parameter,
+            _ => return Ok((*start, first)),
+        };
+        let peak_current = records
+            .iter()
+            .flat_map(|r| r.current.iter())
+            .fold(0.0_f64, |m, i| m.max(i.abs()));
+        let torque_scale = start.k_nm_per_a * peak_current;
+        let damping_scale = start.k_nm_per_a.powi(2) / start.r_ohm;
+        // One restart: each costs a whole fit, and a second (a hundredfold, quartered) found no
+        // motor the first had missed on the records tried, while it tripled the time of a fit
+        // that is refused anyway (an 85,000-sample record at 100 kHz: 7.6 s → 27.6 s).
+        let tenfold = |value: f64, scale: f64| (10.0 * value).clamp(0.01 * scale, 0.5 * scale);
+        let restart = match parameter {
+            "Ts" if torque_scale > 0.0 => MotorParams {
+                ts_nm: tenfold(start.ts_nm, torque_scale),
+                f_nms_per_rad: 0.5 * start.f_nms_per_rad,
+                ..*start
+            },
+            "f" if damping_scale > 0.0 => MotorParams {
+                f_nms_per_rad: tenfold(start.f_nms_per_rad, damping_scale),
+                ts_nm: 0.5 * start.ts_nm,
+                ..*start
+            },
+            _ => return Ok((*start, first)),
+        };
+        match (OutputError {
+            start: restart,
+            ..self.clone()
+        })
+        .fit()
+        {
+            Ok(fit) if fit.accepted() => Ok((restart, fit)),
+            _ => Ok((*start, first)),
+        }
     }
 }
 
-/// [`identify_output_error_with_initial_states`] on RK4 steps `step_factor` times the
+/// [`OutputError::fit`] on RK4 steps `step_factor` times the
 /// simulator's default ([`Simulator::with_step_factor`]), every channel weighted by the noise
 /// level `sigmas` gives it (`(record, channel, σ)`, as [`output_error_sensitivity`] takes
 /// them) in one stage when given; without, by its own scatter and then by its own residual at

@@ -41,7 +41,7 @@ pub fn voltage_input(t: &[f64], voltage: &[f64]) -> Result<Input, FitError> {
 /// [`crate::estimate_level`] (the mean, or the censored fit at an ADC rail; `quantum_v` \[V\]
 /// is the voltage's ADC step if known) with its variance, and a level after the first starts
 /// half a sample period before its first sample (the change fell anywhere in that period,
-/// variance `dt²/12`). Pass both to [`identify_output_error_with_inputs`](crate::identify_output_error_with_inputs).
+/// variance `dt²/12`). Pass both to [`OutputError::level_priors`](crate::OutputError::level_priors).
 pub fn voltage_levels(
     t: &[f64],
     voltage: &[f64],

@@ -20,7 +20,7 @@ use crate::estimation::parameters::{parameter_estimates, ParameterEstimate};
 use crate::estimation::records::{ExcitedRecord, StepTest};
 use crate::excitation::equation_error::electrical_equation;
 use crate::excitation::input_uncertainty::{LevelPrior, StepInputs};
-use crate::excitation::output_error::identify_output_error_with_inputs;
+use crate::excitation::output_error::OutputError;
 use crate::steps::full_model::identify_full_with_inputs;
 use crate::steps::paper_method::{identify_paper, PaperIdentification};
 use crate::steps::start::steady_state_start;
@@ -268,7 +268,7 @@ impl StepPairIdentification {
 /// the steady states when the fit from the paper's result is refused
 /// ([`StepRoute::FullFromSteadyStatesAfterPaper`], kept only if that fit is accepted). Records whose
 /// voltage comes back down ([`StepRecord::whole`]) are fitted whole, rise and fall, by output
-/// error from rest ([`identify_output_error_with_inputs`], the levels and their instants as
+/// error from rest ([`OutputError::level_priors`], the levels and their instants as
 /// uncertain inputs); a pair with one such record and one without is refused.
 pub fn identify_step_pair(
     high: &StepRecord<'_>,
@@ -301,12 +301,10 @@ pub fn identify_step_pair(
                 ),
                 // Rise and fall: the input is piecewise constant, each level (the return's
                 // included) and its instant an uncertain input as the step's are.
-                (Some(h), Some(l)) => identify_output_error_with_inputs(
-                    &[h.record, l.record],
-                    &[h.priors.to_vec(), l.priors.to_vec()],
-                    start,
-                    settings,
-                ),
+                (Some(h), Some(l)) => OutputError::new(&[h.record, l.record], *start)
+                    .level_priors(&[h.priors.to_vec(), l.priors.to_vec()])
+                    .solver(settings)
+                    .fit(),
                 _ => Err(FitError::BadData {
                     series: "step pair".into(),
                     reason: "one record returns to 0 V after its step and the other does not: \

@@ -416,9 +416,7 @@ pub fn step_pair_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], usi
 /// Coverage of the output-error fit's 95 % intervals over `runs` staircase records (40 V,
 /// −20 V, 0 V, 2.5 V over 140 s; or 40 V then 0 V over 150 s with `return_to_zero`).
 pub fn output_error_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], usize) {
-    use fit::{
-        equation_error_start, identify_output_error_with_inputs, voltage_levels, LmSettings,
-    };
+    use fit::{equation_error_start, voltage_levels, OutputError};
     let dt = 1e-3;
     let mut inside = [0; 6];
     let mut with_ci = 0;
@@ -460,9 +458,10 @@ pub fn output_error_coverage(runs: u64, cfg: Config, seed: u64) -> ([usize; 6], 
         let (u, priors) = voltage_levels(&t, &rec.voltage, Some(rec.voltage_lsb)).expect("levels");
         let records = [excited(&u, dt, &rec)];
         let start = equation_error_start(&records).expect("start");
-        let fit =
-            identify_output_error_with_inputs(&records, &[priors], &start, LmSettings::default())
-                .expect("output-error fit");
+        let fit = OutputError::new(&records, start)
+            .level_priors(&[priors])
+            .fit()
+            .expect("output-error fit");
         if fit.ci95.is_some() {
             with_ci += 1;
         }
