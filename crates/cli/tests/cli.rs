@@ -37,6 +37,24 @@ fn model_json_reproduces_table_1() {
             "{key}"
         );
     }
+    // The feedforward constants of Eq. (2) with L neglected: kS = R Ts/k, kV = k + R f/k,
+    // kA = R J/k (0.3·0.03/0.15, 0.15 + 0.3·0.05/0.15, 0.3·1/0.15).
+    for (key, truth) in [("kS", 0.06), ("kV", 0.25), ("kA", 2.0)] {
+        let value = v[key]
+            .as_f64()
+            .unwrap_or_else(|| panic!("key {key} in {v}"));
+        assert!((value / truth - 1.0).abs() < 1e-12, "{key} {value}");
+    }
+    // Every number printed has its unit, the motor's too.
+    let units = &v["units"];
+    let numbers = v.as_object().unwrap().iter().filter(|(_, x)| x.is_number());
+    let motor = v["motor"].as_object().unwrap().iter();
+    for (key, _) in numbers.chain(motor) {
+        assert!(
+            units[key.as_str()].is_string(),
+            "no unit for {key} in {units}"
+        );
+    }
 }
 
 /// Reads the last data row of a record CSV as numbers.

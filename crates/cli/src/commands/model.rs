@@ -1,6 +1,7 @@
 //! `motorid model`: the derived constants (16)–(25) of a motor.
 
 use anyhow::Result;
+use fit::FeedforwardParams;
 use motor_model::{Derived, MotorParams, Regime};
 use serde_json::json;
 
@@ -8,13 +9,51 @@ use crate::args::ModelArgs;
 use crate::console::outln;
 use crate::settings;
 
+/// SI unit of every number `motorid model --json` prints, by key (the motor's by its own
+/// keys).
+const UNITS: [(&str, &str); 20] = [
+    ("KE", "A/V"),
+    ("Ks", "A/(N·m)"),
+    ("tau_e", "s"),
+    ("tau_m", "s"),
+    ("wn", "rad/s"),
+    ("zeta", "-"),
+    ("wa", "rad/s"),
+    ("sigma", "1/s"),
+    ("alpha", "-"),
+    ("gamma", "-"),
+    ("i0", "A"),
+    ("kS", "V"),
+    ("kV", "V·s/rad"),
+    ("kA", "V·s²/rad"),
+    ("R", "ohm"),
+    ("L", "H"),
+    ("k", "N·m/A"),
+    ("f", "N·m·s/rad"),
+    ("J", "kg·m²"),
+    ("Ts", "N·m"),
+];
+
 /// The derived constants as a JSON object (keys KE, Ks, wn, zeta, sigma, wa, tau_m, tau_e,
-/// alpha, gamma, i0, regime) with the motor beside them.
+/// alpha, gamma, i0, regime), the voltage-to-speed feedforward constants kS, kV, kA of the
+/// motor (`E = kS sign(Ω) + kV Ω + kA dΩ/dt`, Eq. (2) with L neglected), the motor beside them,
+/// and `units`: the SI unit of every number, by key.
 pub fn to_json(p: &MotorParams) -> serde_json::Value {
     let d = Derived::new(p);
+    let ff = FeedforwardParams::of_motor(p);
     let mut v = serde_json::to_value(d).unwrap_or_default();
     if let Some(obj) = v.as_object_mut() {
+        obj.insert("kS".into(), json!(ff.ks_v));
+        obj.insert("kV".into(), json!(ff.kv_v_s_per_rad));
+        obj.insert("kA".into(), json!(ff.ka_v_s2_per_rad));
         obj.insert("motor".into(), json!(p));
+        obj.insert(
+            "units".into(),
+            UNITS
+                .iter()
+                .map(|&(k, u)| (k.to_string(), json!(u)))
+                .collect(),
+        );
     }
     v
 }
@@ -45,6 +84,7 @@ pub fn run(s: &Settings) -> Result<()> {
         return Ok(());
     }
     let d = Derived::new(&p);
+    let ff = FeedforwardParams::of_motor(&p);
     outln!(
         "motor: R = {} ohm, L = {} H, k = {} N·m/A, f = {} N·m·s/rad, J = {} kg·m², Ts = {} N·m",
         p.r_ohm,
@@ -102,6 +142,24 @@ pub fn run(s: &Settings) -> Result<()> {
             format!("{:.6}", d.i0),
             "A",
             "(26) breakaway current Ts/k",
+        ),
+        (
+            "kS",
+            format!("{:.6}", ff.ks_v),
+            "V",
+            "static voltage R Ts/k (feedforward, Eq. (2) with L neglected)",
+        ),
+        (
+            "kV",
+            format!("{:.6}", ff.kv_v_s_per_rad),
+            "V·s/rad",
+            "velocity voltage k + R f/k",
+        ),
+        (
+            "kA",
+            format!("{:.6}", ff.ka_v_s2_per_rad),
+            "V·s²/rad",
+            "acceleration voltage R J/k",
         ),
     ];
     for (name, value, unit, what) in rows {
