@@ -155,7 +155,11 @@ fn batch_identifies_a_fleet_and_reports_broken_folders() {
     }
     let csv = std::fs::read_to_string(fleet.join("summary.csv")).unwrap();
     assert_eq!(csv.lines().count(), 13, "{csv}");
-    assert!(csv.starts_with("motor,method,status,iterations,seconds,R,R_ci_lo,R_ci_hi,R_truth"));
+    // Every number's unit in the header, as in a record's.
+    assert!(
+        csv.starts_with("motor,method,status,iterations,seconds[s],R[ohm],R_ci_lo[ohm],R_ci_hi[ohm],R_truth[ohm],R_error[%]"),
+        "{csv}"
+    );
     // A folder with a broken record.
     let broken = fleet.join("motor_999");
     std::fs::create_dir_all(&broken).unwrap();

@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 use fit::{
     accuracy, parameter_estimates, summarize, FullFit, ParameterAccuracy, StepMethod, PARAM_NAMES,
+    PARAM_UNITS,
 };
 use motor_model::MotorParams;
 use serde_json::{json, Value};
@@ -229,10 +230,11 @@ fn row_json(r: &Row) -> Value {
 
 /// The summary as CSV: one row per motor.
 fn summary_csv(rows: &[Row]) -> String {
-    let mut out = String::from("motor,method,status,iterations,seconds");
-    for name in PARAM_NAMES {
+    // Units in brackets after each name, as in a record's header.
+    let mut out = String::from("motor,method,status,iterations,seconds[s]");
+    for (name, unit) in PARAM_NAMES.iter().zip(PARAM_UNITS) {
         out.push_str(&format!(
-            ",{name},{name}_ci_lo,{name}_ci_hi,{name}_truth,{name}_error_percent"
+            ",{name}[{unit}],{name}_ci_lo[{unit}],{name}_ci_hi[{unit}],{name}_truth[{unit}],{name}_error[%]"
         ));
     }
     out.push_str(",model_check,error\n");
