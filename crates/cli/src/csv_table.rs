@@ -133,10 +133,22 @@ impl Dialect {
         }
     }
 
-    /// The fields of a row, the index column dropped.
+    /// The fields of a row, the index column dropped; a delimiter inside double quotes
+    /// (`"1,5"`, a header name `"a;b"`) is part of its field.
     pub(crate) fn fields<'a>(&self, line: &'a str) -> impl Iterator<Item = &'a str> {
-        line.split(char::from(self.delimiter))
-            .skip(usize::from(self.index_column))
+        let delimiter = self.delimiter;
+        let mut fields = Vec::new();
+        let (mut start, mut quoted) = (0, false);
+        for (i, b) in line.bytes().enumerate() {
+            if b == b'"' {
+                quoted = !quoted;
+            } else if b == delimiter && !quoted {
+                fields.push(&line[start..i]);
+                start = i + 1;
+            }
+        }
+        fields.push(&line[start..]);
+        fields.into_iter().skip(usize::from(self.index_column))
     }
 
     /// The number a field holds: white space and quotes around it removed, a decimal comma
@@ -288,10 +300,26 @@ impl TableParser {
         newline: bool,
     ) -> std::result::Result<(), (usize, String)> {
         let line_no = self.line_no;
-        if line_no == 1 && (bytes.starts_with(&[0xFF, 0xFE]) || bytes.starts_with(&[0xFE, 0xFF])) {
+        // UTF-16 with a byte-order mark, or without one: ASCII text with a NUL beside every
+        // character.
+        let alternate_nuls = |first: usize| {
+            bytes.len() >= 4
+                && bytes
+                    .iter()
+                    .skip(first)
+                    .step_by(2)
+                    .take(64)
+                    .all(|&b| b == 0)
+        };
+        if line_no == 1
+            && (bytes.starts_with(&[0xFF, 0xFE])
+                || bytes.starts_with(&[0xFE, 0xFF])
+                || alternate_nuls(0)
+                || alternate_nuls(1))
+        {
             return Err((
                 line_no,
-                "UTF-16 text (it starts with a UTF-16 byte-order mark): save the file as UTF-8 (in Excel: CSV UTF-8; or iconv -f UTF-16 -t UTF-8)".to_string(),
+                "UTF-16 text: save the file as UTF-8 (in Excel: CSV UTF-8; or iconv -f UTF-16 -t UTF-8)".to_string(),
             ));
         }
         if let Some(i) = bytes.iter().position(|&b| b == 0) {
@@ -307,7 +335,7 @@ impl TableParser {
             (
                 line_no,
                 format!(
-                    "not UTF-8 text (invalid byte at column {}): is this a CSV file?",
+                    "not UTF-8 text (invalid byte at column {}): is this a CSV file? If it is, save it as UTF-8",
                     e.valid_up_to() + 1
                 ),
             )
@@ -316,6 +344,13 @@ impl TableParser {
             text = text.strip_prefix('\u{feff}').unwrap_or(text);
         }
         let line = text.trim_end_matches('\r');
+        // Before the header, a carriage return inside the line: the whole file is one line.
+        if self.table.names.is_empty() && line.contains('\r') {
+            return Err((
+                line_no,
+                "lines end in a carriage return alone (CR, as old Mac tools write): convert them to line feeds (tr '\\r' '\\n' < in > out)".to_string(),
+            ));
+        }
         self.saw_newline = newline;
         let table = &mut self.table;
         if line.trim().is_empty() {
@@ -344,9 +379,17 @@ impl TableParser {
                 break;
             };
             let v: f64 = dialect.number(field).ok_or_else(|| {
+                let text = unquote(field);
+                let hint = if text.contains(',') && text.contains('.') {
+                    " (thousands separators? write the number without them)"
+                } else if text.contains(',') && dialect.delimiter == b',' {
+                    " (a decimal comma? write a point, or separate the fields with ;)"
+                } else {
+                    ""
+                };
                 (
                     line_no,
-                    format!("column `{name}`: `{}` is not a number", field.trim()),
+                    format!("column `{name}`: `{}` is not a number{hint}", field.trim()),
                 )
             })?;
             if !v.is_finite() {

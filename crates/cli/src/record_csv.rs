@@ -469,6 +469,13 @@ mod tests {
     }
 
     #[test]
+    fn a_quoted_header_name_keeps_its_delimiter() {
+        let t = parse_bytes(b"\"t[s]\",\"pos,x[rad]\"\n0,1\n0.001,2\n").unwrap();
+        assert_eq!(t.names, ["t", "pos,x"]);
+        assert_eq!(t.columns, [vec![0.0, 0.001], vec![1.0, 2.0]]);
+    }
+
+    #[test]
     fn every_dialect_reads_to_the_same_table() {
         let plain = parse_bytes(b"t[s],voltage[V]\n0,1.5\n0.001,2\n").unwrap();
         for text in [
@@ -477,6 +484,8 @@ mod tests {
             b"t[s];voltage[V]\n0;1,5\n0,001;2\n",
             b"\"t[s]\";\"voltage[V]\"\r\n0;\"1,5\"\r\n0,001;2\r\n",
             b"t[s]\tvoltage[V]\n0\t1.5\n0.001\t2\n",
+            // A delimiter inside quotes belongs to its field.
+            b"t[s];voltage[V]\n\"0\";\"1,5\"\n0,001;\"2\"\n",
         ] {
             let t = parse_bytes(text).unwrap();
             let shown = String::from_utf8_lossy(text);

@@ -165,6 +165,28 @@ fn broken_files_give_one_line_errors_naming_file_and_line() {
             ":1: UTF-16 text",
         ),
         (
+            "utf16_no_bom.csv",
+            b"t\0,\0v\0o\0l\0t\0a\0g\0e\0\n\0".to_vec(),
+            ":1: UTF-16 text",
+        ),
+        (
+            "cr_only.csv",
+            format!("{HEADER}{}", rows(3))
+                .replace('\n', "\r")
+                .into_bytes(),
+            ":1: lines end in a carriage return alone",
+        ),
+        (
+            "decimal_comma_quoted.csv",
+            format!("{HEADER}{}0.5,\"40,5\",1,1\n", rows(3)).into_bytes(),
+            ":5: column `voltage`: `\"40,5\"` is not a number (a decimal comma?",
+        ),
+        (
+            "thousands.csv",
+            b"t;voltage;current;speed\n0;1.000,5;1;1\n".to_vec(),
+            ":2: column `voltage`: `1.000,5` is not a number (thousands separators?",
+        ),
+        (
             "binary.png",
             b"\x89PNG\r\n\x1a\n\0\0\0\rIHDR".to_vec(),
             ":1: not UTF-8 text",
