@@ -14,10 +14,20 @@ pub(crate) const STDOUT_FAILED: &str = "cannot write to standard output";
 /// (`cannot write to standard output: No space left on device (os error 28)`), not a panic.
 /// Called through [`outln!`].
 pub fn stdout_line(args: std::fmt::Arguments<'_>) -> Result<()> {
+    WROTE_STDOUT.store(true, std::sync::atomic::Ordering::Relaxed);
     let mut out = std::io::stdout().lock();
     out.write_fmt(format_args!("{args}\n"))
         .and_then(|()| out.flush())
         .context(STDOUT_FAILED)
+}
+
+/// Whether the report has begun on standard output ([`stdout_line`]).
+static WROTE_STDOUT: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Whether anything of the report has been written to standard output: a command that fails
+/// before its `--json` object is printed gets one carrying its error instead.
+pub fn wrote_stdout() -> bool {
+    WROTE_STDOUT.load(std::sync::atomic::Ordering::Relaxed)
 }
 
 /// `println!` that returns `anyhow::Result<()>` instead of panicking when standard output

@@ -97,7 +97,24 @@ fn main() -> ExitCode {
     quiet_broken_pipe();
     // A negative number is an option's value (`--torque-constant -0.05`), never a flag.
     let command = Cli::command().mut_subcommands(|c| c.allow_negative_numbers(true));
-    let cli = Cli::from_arg_matches(&command.get_matches()).unwrap_or_else(|e| e.exit());
+    let cli = match command
+        .try_get_matches()
+        .and_then(|m| Cli::from_arg_matches(&m))
+    {
+        Ok(cli) => cli,
+        Err(e) => {
+            // A command line asking for JSON gets its refusal as JSON too.
+            let json = std::env::args().any(|a| a == "--json");
+            if json && e.use_stderr() {
+                let first = e.to_string();
+                let message = first.lines().next().unwrap_or_default();
+                let message = message.strip_prefix("error: ").unwrap_or(message);
+                json_failure(message, EXIT_BAD_INPUT);
+            }
+            e.exit()
+        }
+    };
+    let json = wants_json(&cli.command);
     let outcome =
         output::check(&declared_outputs(&cli.command)).and_then(|()| match cli.command {
             Command::Model(a) => {
@@ -128,13 +145,36 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
             crate::console::errln!("error: {err:#}");
-            if err.chain().any(|e| e.is::<BadInput>()) {
-                ExitCode::from(EXIT_BAD_INPUT)
+            let code = if err.chain().any(|e| e.is::<BadInput>()) {
+                EXIT_BAD_INPUT
             } else if err.chain().any(|e| e.is::<NotConverged>()) {
-                ExitCode::from(EXIT_NOT_CONVERGED)
+                EXIT_NOT_CONVERGED
             } else {
-                ExitCode::from(EXIT_FAILURE)
+                EXIT_FAILURE
+            };
+            if json && !crate::console::wrote_stdout() {
+                json_failure(&format!("{err:#}"), code);
             }
+            ExitCode::from(code)
         }
     }
+}
+
+/// Whether the command was asked for one JSON object on standard output.
+fn wants_json(command: &Command) -> bool {
+    match command {
+        Command::Model(a) => a.json,
+        Command::Identify(a) => a.json,
+        Command::Montecarlo(a) => a.json,
+        Command::Emps(a) => a.json,
+        Command::Diagnose(a) => a.json,
+        _ => false,
+    }
+}
+
+/// The one JSON object of a `--json` command that failed before printing its own:
+/// `{"error": MESSAGE, "exit_code": CODE}` (the message also goes to standard error).
+fn json_failure(message: &str, code: u8) {
+    let object = serde_json::json!({ "error": message, "exit_code": code });
+    let _ = crate::console::stdout_line(format_args!("{object}"));
 }

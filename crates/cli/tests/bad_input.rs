@@ -861,3 +861,43 @@ fn negative_numbers_are_option_values_checked_as_such() {
         "--torque-constant -0.05: expected a positive number",
     );
 }
+
+/// With `--json`, a command that fails before its own object prints one JSON object on
+/// standard output carrying the error and the exit code (it printed nothing), whether the
+/// command line or the input is at fault; the message also goes to standard error.
+#[test]
+fn json_failures_print_one_object_with_the_error_and_its_exit_code() {
+    for args in [
+        vec![
+            "identify",
+            "--high",
+            "missing.csv",
+            "--low",
+            "missing.csv",
+            "--json",
+        ],
+        vec![
+            "diagnose",
+            "--high",
+            "missing.csv",
+            "--low",
+            "missing.csv",
+            "--json",
+        ],
+        vec!["model", "--motor", "/no/such/motor.json", "--json"],
+        vec!["identify", "--json", "--no-such-option"],
+    ] {
+        let out = motorid(&args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {}", stderr(&out));
+        let text = String::from_utf8_lossy(&out.stdout).to_string();
+        let v: serde_json::Value = serde_json::from_str(&text)
+            .unwrap_or_else(|e| panic!("{args:?}: not one JSON object ({e}): `{text}`"));
+        assert_eq!(v["exit_code"], 2, "{args:?}: {v}");
+        let message = v["error"].as_str().unwrap_or_default();
+        assert!(
+            !message.is_empty() && stderr(&out).contains(message.lines().next().unwrap()),
+            "{args:?}: {v} against {}",
+            stderr(&out)
+        );
+    }
+}
