@@ -123,9 +123,8 @@ impl Dialect {
             .filter(|&(_, n)| n > count(','))
             .max_by_key(|&(_, n)| n)
             .map_or(b',', |(d, _)| d);
-        let mut names = line.split(char::from(delimiter));
-        let index_column =
-            names.next().is_some_and(|first| unquote(first).is_empty()) && names.next().is_some();
+        let names = split_fields(line, delimiter);
+        let index_column = names.len() > 1 && unquote(names[0]).is_empty();
         Dialect {
             delimiter,
             decimal_comma: delimiter != b',',
@@ -136,19 +135,9 @@ impl Dialect {
     /// The fields of a row, the index column dropped; a delimiter inside double quotes
     /// (`"1,5"`, a header name `"a;b"`) is part of its field.
     pub(crate) fn fields<'a>(&self, line: &'a str) -> impl Iterator<Item = &'a str> {
-        let delimiter = self.delimiter;
-        let mut fields = Vec::new();
-        let (mut start, mut quoted) = (0, false);
-        for (i, b) in line.bytes().enumerate() {
-            if b == b'"' {
-                quoted = !quoted;
-            } else if b == delimiter && !quoted {
-                fields.push(&line[start..i]);
-                start = i + 1;
-            }
-        }
-        fields.push(&line[start..]);
-        fields.into_iter().skip(usize::from(self.index_column))
+        split_fields(line, self.delimiter)
+            .into_iter()
+            .skip(usize::from(self.index_column))
     }
 
     /// The number a field holds: white space and quotes around it removed, a decimal comma
@@ -161,6 +150,23 @@ impl Dialect {
             field.parse().ok()
         }
     }
+}
+
+/// The fields of `line` between its `delimiter`s; a delimiter inside double quotes is part of
+/// its field.
+fn split_fields(line: &str, delimiter: u8) -> Vec<&str> {
+    let mut fields = Vec::new();
+    let (mut start, mut quoted) = (0, false);
+    for (i, b) in line.bytes().enumerate() {
+        if b == b'"' {
+            quoted = !quoted;
+        } else if b == delimiter && !quoted {
+            fields.push(&line[start..i]);
+            start = i + 1;
+        }
+    }
+    fields.push(&line[start..]);
+    fields
 }
 
 /// `field` without the white space and the pair of double quotes around it (`"t[s]"` as
