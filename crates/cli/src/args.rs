@@ -38,6 +38,9 @@ pub enum Command {
     /// The EMPS benchmark (real data): identify the axis, then simulate it in closed loop on the
     /// record with unmodelled force pulses and report where the model disagrees.
     Emps(EmpsArgs),
+    /// Replay servo logs with a model file (--model, from `identify --save-model`): closed loop
+    /// from `goal` when the model has a controller, else open loop; position MAE and RMSE.
+    Replay(ReplayArgs),
     /// Find where the identified model and the records disagree, which unmodelled effect causes
     /// it, how large it is, and how far the gap shrinks once it is in the model.
     Diagnose(DiagnoseArgs),
@@ -375,6 +378,32 @@ pub struct IdentifyArgs {
     /// of a longer run).
     #[arg(long, value_enum, default_value = "auto")]
     pub initial_state: InitialStateArg,
+    /// Servo logs: a known load on the output, not fitted (repeatable): pendulum:m=KG,l=M[,arm=KG]
+    /// (q = 0 hanging down), inertia:j=KG_M2, spring:k=NM_PER_RAD[,q0=RAD], constant:t=NM. A
+    /// record's own `# load:` lines win.
+    #[arg(long, value_name = "KIND:KEY=VALUE,...")]
+    pub load: Vec<String>,
+    /// Servo logs: the servo's own position loop, p:kp=..,gain=..,max_duty=..,
+    /// pd:kp=..,kd=..,gain=..,max_duty=.. or a preset (dynamixel-xl330:kp=N). A record's own
+    /// `# controller:` line wins.
+    #[arg(long, value_name = "KIND:KEY=VALUE,...")]
+    pub controller: Option<String>,
+    /// Servo logs: positions are on the output of an N:1 gearbox (the motor's own constants are
+    /// reported beside the output's). A record's own `# gear:` line wins.
+    #[arg(long, value_name = "N")]
+    pub gear: Option<f64>,
+    /// Servo logs: fit on the recorded duty (open loop) instead of replaying the position loop
+    /// from `goal` (closed loop, the default when the records have a controller and a goal).
+    #[arg(long)]
+    pub open_loop: bool,
+    /// Servo logs: held-out records, replayed with the identified model and scored (not fitted;
+    /// repeatable).
+    #[arg(long, value_name = "FILE.csv", requires = "record")]
+    pub validate: Vec<PathBuf>,
+    /// Servo logs: write the identified model (motor, gearing, loads, controller) as a model
+    /// file for `replay --model` and `simulate --model`.
+    #[arg(long, value_name = "M.json")]
+    pub save_model: Option<PathBuf>,
 }
 
 /// How a record's simulation starts.
@@ -528,4 +557,41 @@ pub struct DemoArgs {
     #[arg(long, short = 'q')]
     #[allow(dead_code)]
     pub quiet: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct ReplayArgs {
+    /// The model file (`identify --save-model`).
+    #[arg(long, value_name = "M.json")]
+    pub model: PathBuf,
+    /// Servo logs to replay (repeatable).
+    #[arg(long, value_name = "FILE.csv", required = true)]
+    pub record: Vec<PathBuf>,
+    /// Servo logs: a known load on the output, not fitted (repeatable): pendulum:m=KG,l=M[,arm=KG]
+    /// (q = 0 hanging down), inertia:j=KG_M2, spring:k=NM_PER_RAD[,q0=RAD], constant:t=NM. A
+    /// record's own `# load:` lines win.
+    #[arg(long, value_name = "KIND:KEY=VALUE,...")]
+    pub load: Vec<String>,
+    /// Servo logs: the servo's own position loop, p:kp=..,gain=..,max_duty=..,
+    /// pd:kp=..,kd=..,gain=..,max_duty=.. or a preset (dynamixel-xl330:kp=N). A record's own
+    /// `# controller:` line wins.
+    #[arg(long, value_name = "KIND:KEY=VALUE,...")]
+    pub controller: Option<String>,
+    /// Servo logs: positions are on the output of an N:1 gearbox (the motor's own constants are
+    /// reported beside the output's). A record's own `# gear:` line wins.
+    #[arg(long, value_name = "N")]
+    pub gear: Option<f64>,
+    /// Replay from the recorded duty or voltage (open loop) even where the model has a
+    /// controller and the record a goal.
+    #[arg(long)]
+    pub open_loop: bool,
+    /// Write figures: logged and replayed position and their difference, per record.
+    #[arg(long, value_name = "DIR")]
+    pub plot: Option<PathBuf>,
+    /// No progress messages or warnings on standard error.
+    #[arg(long, short = 'q')]
+    pub quiet: bool,
+    /// Print one JSON object instead of tables.
+    #[arg(long)]
+    pub json: bool,
 }

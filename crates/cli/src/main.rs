@@ -21,6 +21,8 @@ mod plot;
 mod progress;
 mod record_checks;
 mod record_csv;
+mod servo_csv;
+mod servo_report;
 mod settings;
 mod simulated;
 mod steps;
@@ -80,6 +82,7 @@ fn declared_outputs(command: &Command) -> Vec<output::Declared> {
         Command::Emps(a) => outputs.extend(a.plot.iter().map(|p| dir("--plot", p))),
         Command::Identify(a) => {
             outputs.extend(a.plot.iter().map(|p| dir("--plot", p)));
+            outputs.extend(a.save_model.iter().map(|p| file("--save-model", p)));
             // The summaries go into the batch folder; a missing folder is the batch's own error.
             if let Some(batch) = a.batch.as_ref().filter(|d| d.is_dir()) {
                 for name in ["summary.csv", "summary.json"] {
@@ -88,6 +91,7 @@ fn declared_outputs(command: &Command) -> Vec<output::Declared> {
             }
         }
         Command::Diagnose(a) => outputs.extend(a.plot.iter().map(|p| dir("--plot", p))),
+        Command::Replay(a) => outputs.extend(a.plot.iter().map(|p| dir("--plot", p))),
         Command::Model(_) | Command::Montecarlo(_) | Command::Emulate(_) => {}
     }
     outputs
@@ -137,6 +141,9 @@ fn main() -> ExitCode {
                 commands::acquire::Settings::from_args(&a).and_then(|s| commands::acquire::run(&s))
             }
             Command::Emps(a) => commands::emps::run(&commands::emps::Settings::from_args(&a)),
+            Command::Replay(a) => {
+                commands::replay::Settings::from_args(&a).and_then(|s| commands::replay::run(&s))
+            }
             Command::Diagnose(a) => {
                 commands::diagnose::settings(&a).and_then(|s| commands::diagnose::run(&s))
             }
@@ -168,6 +175,7 @@ fn wants_json(command: &Command) -> bool {
         Command::Montecarlo(a) => a.json,
         Command::Emps(a) => a.json,
         Command::Diagnose(a) => a.json,
+        Command::Replay(a) => a.json,
         _ => false,
     }
 }

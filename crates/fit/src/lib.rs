@@ -48,6 +48,7 @@ pub mod diagnose;
 mod error;
 mod estimation;
 mod excitation;
+mod servo;
 mod steps;
 mod voltage_speed;
 
@@ -90,6 +91,10 @@ pub use excitation::input_uncertainty::{
 };
 pub use excitation::output_error::{predict_output_error, OutputError};
 pub use excitation::voltage::{voltage_input, voltage_levels};
+pub use servo::{
+    replay_record, score, score_records, Friction, Loop, ReplayScore, ServoFit, ServoFitResult,
+    ServoRecord, SERVO_NAMES, SERVO_UNITS, SMALL_SERVO_START,
+};
 pub use steps::full_model::{identify_full, identify_full_with_inputs};
 pub use steps::model33::{fit_33, Fit33, Params33, Record33};
 pub use steps::paper_method::{

@@ -31,6 +31,15 @@ pub enum ModelError {
         /// What is wrong with it.
         reason: String,
     },
+    /// A load, controller or model file could not be read (`name:key=value,...`).
+    RigSpec {
+        /// What it is (`load`, `controller`, `model file`).
+        what: &'static str,
+        /// The text given.
+        spec: String,
+        /// What is wrong with it.
+        reason: String,
+    },
     /// A simulation would take more RK4 steps than its bound
     /// ([`crate::MAX_RK4_STEPS_PER_SAMPLE`] a sample on average, 1e9 at most): a time constant
     /// of the model (a brush drop's knee, a deep saturation) or an effect's step limit (a fast
@@ -73,6 +82,9 @@ impl fmt::Display for ModelError {
             } => write!(f, "{name} = {value}: expected {expected}"),
             ModelError::EffectSpec { spec, reason } => {
                 write!(f, "effect `{spec}`: {reason}")
+            }
+            ModelError::RigSpec { what, spec, reason } => {
+                write!(f, "{what} `{spec}`: {reason}")
             }
             ModelError::TooStiff {
                 budget,

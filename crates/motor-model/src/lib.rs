@@ -13,6 +13,8 @@
 //! - [`Simulator`]: stick-slip simulation for any input [`Input`] with the unmodelled
 //!   [`Effects`] of the diagnosis (Stribeck friction, cogging, sensor lag, thermal drift,
 //!   quadratic drag, brush drop, inductance saturation).
+//! - [`ServoRig`], [`replay`]: a geared servo with known [`Load`]s and its firmware's
+//!   [`Controller`], replayed on a log's own time stamps; [`ModelFile`] (SPEC section 8).
 //! - [`MeasurementModel`]: ADC, noise and encoder, separate from the plant.
 //! - `withheld` (with the feature `withheld`): the data generator of the withheld-effect
 //!   benchmark, with a plant of its own and each effect in two functional forms.
@@ -38,6 +40,7 @@ pub mod paper;
 mod params;
 mod real;
 mod rng;
+mod servo;
 mod sim;
 mod steady;
 mod step;
@@ -58,6 +61,11 @@ pub use measure::{
 pub use params::MotorParams;
 pub use real::{Dual, Real};
 pub use rng::NoiseRng;
+pub use servo::{
+    replay, Controller, Load, ModelFile, ReplaySettings, ServoDrive, ServoMotor, ServoRig,
+    ServoRun, ServoTrace, MAX_REPLAY_SUBSTEPS, MODEL_FILE_FORMAT, MODEL_FILE_VERSION,
+    STANDARD_GRAVITY_M_S2, XL330_GAIN_PER_RAD,
+};
 pub use sim::effects::{
     BrushDrop, CoggingTorque, CurrentSensorLag, Domain, Effect, EffectKind, Effects,
     InductanceSaturation, ParamSpec, QuadraticDrag, StribeckFriction, ThermalDrift,

@@ -7,4 +7,5 @@ pub mod fleet;
 pub mod identify;
 pub mod model;
 pub mod montecarlo;
+pub mod replay;
 pub mod simulate;

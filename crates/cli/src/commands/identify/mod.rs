@@ -5,6 +5,7 @@ mod kinds;
 mod model_check;
 mod options;
 mod report;
+mod servo;
 
 pub use options::Settings;
 
@@ -329,6 +330,7 @@ pub fn run(a: &Settings) -> Result<()> {
         } => return run_steady(a, paths, *resistance_ohm, *torque_constant),
         Source::Records(paths) => return run_output_error(a, paths, None),
         Source::Batch(dir) => return batch::run(a, dir),
+        Source::Servo { records, validate } => return servo::run(a, records, validate),
         Source::Pair { high, low } => (high, low),
     };
     let map = &a.columns;

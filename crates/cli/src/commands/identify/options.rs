@@ -10,6 +10,7 @@ use motor_model::MotorParams;
 use crate::args::{AxisArg, DriveArg, IdentifyArgs};
 use crate::errors::BadInput;
 use crate::record_csv::ColumnMap;
+use crate::servo_csv::{self, RigOptions};
 use crate::settings;
 
 /// Where the records of an identification come from.
@@ -36,6 +37,14 @@ pub enum Source {
     Records(Vec<PathBuf>),
     /// A folder of motor folders (`--batch`).
     Batch(PathBuf),
+    /// Servo logs (`--record` files with `duty` or `goal`, or a rig given with `--load` /
+    /// `--controller` / `--gear`), with held-out records (`--validate`).
+    Servo {
+        /// The records fitted.
+        records: Vec<PathBuf>,
+        /// The held-out records.
+        validate: Vec<PathBuf>,
+    },
 }
 
 /// Whether positions are angles or lengths (the units of J, f, Ts).
@@ -91,6 +100,12 @@ pub struct Settings {
     /// `--folder-limit`: how long one motor folder of `--batch` may take before it is set
     /// aside as an error row.
     pub folder_limit: std::time::Duration,
+    /// The servo rig given on the command line (`--load`, `--controller`, `--gear`).
+    pub rig: RigOptions,
+    /// `--open-loop`: servo logs fitted on their recorded duty.
+    pub open_loop: bool,
+    /// `--save-model`: where the identified servo model is written.
+    pub save_model: Option<PathBuf>,
 }
 
 impl Settings {
@@ -136,6 +151,19 @@ impl Settings {
                 paths: a.steady.clone(),
                 resistance_ohm,
                 torque_constant,
+            }
+        } else if !a.record.is_empty()
+            && (!a.load.is_empty()
+                || a.controller.is_some()
+                || a.gear.is_some()
+                || a.save_model.is_some()
+                || !a.validate.is_empty()
+                || a.open_loop
+                || a.record.iter().any(|p| servo_csv::is_servo_log(p)))
+        {
+            Source::Servo {
+                records: a.record.clone(),
+                validate: a.validate.clone(),
             }
         } else if !a.record.is_empty() {
             Source::Records(a.record.clone())
@@ -197,6 +225,9 @@ impl Settings {
             decimation: a.decimation,
             initial_state: settings::initial_state(a.initial_state),
             folder_limit,
+            rig: RigOptions::parse(&a.load, a.controller.as_deref(), a.gear)?,
+            open_loop: a.open_loop,
+            save_model: a.save_model.clone(),
         })
     }
 }

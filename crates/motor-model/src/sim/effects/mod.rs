@@ -27,6 +27,7 @@ pub use cogging::CoggingTorque;
 pub use drag::QuadraticDrag;
 pub use saturation::InductanceSaturation;
 pub use sensor_lag::CurrentSensorLag;
+pub(crate) use spec::SpecArgs;
 pub use spec::{Domain, ParamSpec};
 pub use stribeck::StribeckFriction;
 pub use thermal::{ThermalDrift, COPPER_ALPHA_PER_K};
@@ -271,80 +272,6 @@ impl fmt::Display for Effect {
     }
 }
 
-/// `key=value` pairs of one effect spec (each key once), consumed as they are read so that
-/// unknown keys are reported.
-struct SpecArgs<'a> {
-    spec: &'a str,
-    pairs: Vec<(&'a str, f64)>,
-}
-
-impl<'a> SpecArgs<'a> {
-    fn parse(spec: &'a str, body: &'a str) -> Result<Self, ModelError> {
-        let mut pairs = Vec::new();
-        for item in body.split(',').map(str::trim).filter(|s| !s.is_empty()) {
-            let (key, value) = item.split_once('=').ok_or_else(|| ModelError::EffectSpec {
-                spec: spec.to_string(),
-                reason: format!("`{item}` is not of the form key=value"),
-            })?;
-            let value: f64 = value.trim().parse().map_err(|_| ModelError::EffectSpec {
-                spec: spec.to_string(),
-                reason: format!(
-                    "value of `{}` is not a number: `{}`",
-                    key.trim(),
-                    value.trim()
-                ),
-            })?;
-            let key = key.trim();
-            if pairs.iter().any(|(k, _)| *k == key) {
-                return Err(ModelError::EffectSpec {
-                    spec: spec.to_string(),
-                    reason: format!("key `{key}` given twice; give each key once"),
-                });
-            }
-            pairs.push((key, value));
-        }
-        Ok(SpecArgs { spec, pairs })
-    }
-
-    /// The values of `table`'s keys, defaults for those not given; refuses a missing required
-    /// key and any key the table does not have.
-    fn values(mut self, table: &[ParamSpec]) -> Result<Vec<f64>, ModelError> {
-        // An unknown key first: `vb` misspelt is a typo to name, not a missing `vb=`.
-        if let Some((key, _)) = self
-            .pairs
-            .iter()
-            .find(|(k, _)| table.iter().all(|p| p.key != *k))
-        {
-            let known: Vec<&str> = table.iter().map(|p| p.key).collect();
-            return Err(ModelError::EffectSpec {
-                spec: self.spec.to_string(),
-                reason: if known.is_empty() {
-                    format!("unknown key `{key}`; this effect takes no parameters")
-                } else {
-                    format!(
-                        "unknown key `{key}`; this effect takes {}",
-                        known.join(", ")
-                    )
-                },
-            });
-        }
-        let mut out = Vec::with_capacity(table.len());
-        for p in table {
-            let given = self
-                .pairs
-                .iter()
-                .position(|(k, _)| *k == p.key)
-                .map(|pos| self.pairs.remove(pos).1);
-            let value = given.or(p.default).ok_or_else(|| ModelError::EffectSpec {
-                spec: self.spec.to_string(),
-                reason: format!("missing `{}=` ({} in {})", p.key, p.description, p.unit),
-            })?;
-            out.push(value);
-        }
-        Ok(out)
-    }
-}
-
 impl FromStr for Effect {
     type Err = ModelError;
 
@@ -352,9 +279,13 @@ impl FromStr for Effect {
     fn from_str(spec: &str) -> Result<Self, ModelError> {
         let spec = spec.trim();
         let (name, body) = spec.split_once(':').unwrap_or((spec, ""));
-        let args = SpecArgs::parse(spec, body)?;
+        let failed = |reason| ModelError::EffectSpec {
+            spec: spec.to_string(),
+            reason,
+        };
+        let args = SpecArgs::parse(body).map_err(failed)?;
         if name.trim() == "none" {
-            args.values(&[])?;
+            args.values(&[], "this effect").map_err(failed)?;
             return Ok(Effect::None);
         }
         let kind: EffectKind = name.parse().map_err(|e| match e {
@@ -364,7 +295,10 @@ impl FromStr for Effect {
             },
             other => other,
         })?;
-        Effect::from_values(kind, &args.values(kind.params())?)
+        Effect::from_values(
+            kind,
+            &args.values(kind.params(), "this effect").map_err(failed)?,
+        )
     }
 }
 

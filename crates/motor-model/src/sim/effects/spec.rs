@@ -142,3 +142,66 @@ impl ParamSpec {
         }
     }
 }
+
+/// `key=value` pairs of one `name:key=value,...` spec (each key once), consumed as they are
+/// read so that unknown keys are reported. Errors are the reason in words; the caller names
+/// the spec (an effect, a load, a controller).
+pub(crate) struct SpecArgs<'a> {
+    pairs: Vec<(&'a str, f64)>,
+}
+
+impl<'a> SpecArgs<'a> {
+    /// The pairs of `body` (the text after `name:`).
+    pub(crate) fn parse(body: &'a str) -> Result<Self, String> {
+        let mut pairs = Vec::new();
+        for item in body.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+            let (key, value) = item
+                .split_once('=')
+                .ok_or_else(|| format!("`{item}` is not of the form key=value"))?;
+            let value: f64 = value.trim().parse().map_err(|_| {
+                format!(
+                    "value of `{}` is not a number: `{}`",
+                    key.trim(),
+                    value.trim()
+                )
+            })?;
+            let key = key.trim();
+            if pairs.iter().any(|(k, _)| *k == key) {
+                return Err(format!("key `{key}` given twice; give each key once"));
+            }
+            pairs.push((key, value));
+        }
+        Ok(SpecArgs { pairs })
+    }
+
+    /// The values of `table`'s keys, defaults for those not given, each checked against its
+    /// domain (`what` names the thing in messages: "this effect"); refuses a missing required key and any key the table does not have.
+    pub(crate) fn values(mut self, table: &[ParamSpec], what: &str) -> Result<Vec<f64>, String> {
+        // An unknown key first: `vb` misspelt is a typo to name, not a missing `vb=`.
+        if let Some((key, _)) = self
+            .pairs
+            .iter()
+            .find(|(k, _)| table.iter().all(|p| p.key != *k))
+        {
+            let known: Vec<&str> = table.iter().map(|p| p.key).collect();
+            return Err(if known.is_empty() {
+                format!("unknown key `{key}`; {what} takes no parameters")
+            } else {
+                format!("unknown key `{key}`; {what} takes {}", known.join(", "))
+            });
+        }
+        let mut out = Vec::with_capacity(table.len());
+        for p in table {
+            let given = self
+                .pairs
+                .iter()
+                .position(|(k, _)| *k == p.key)
+                .map(|pos| self.pairs.remove(pos).1);
+            let value = given
+                .or(p.default)
+                .ok_or_else(|| format!("missing `{}=` ({} in {})", p.key, p.description, p.unit))?;
+            out.push(value);
+        }
+        Ok(out)
+    }
+}
