@@ -4,10 +4,13 @@
 # two held-out logs in closed loop; prints each split's held-out position MAE and their mean
 # beside the BAM project's published models replayed on the same logs.
 #
-#   scripts/xl330_loto.sh [path/to/motorid]     (default: target/release/motorid)
+#   scripts/xl330_loto.sh [path/to/motorid [identify options...]]
+#   (default: target/release/motorid; e.g. `scripts/xl330_loto.sh target/release/motorid
+#   --friction stribeck`)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bin=${1:-target/release/motorid}
+shift || true
 data=../shared/real-data/bam_xl330
 [ -x "$bin" ] || cargo build --release -q
 trajectories=(sin_sin lift_and_drop up_and_down sin_time_square)
@@ -24,7 +27,7 @@ for out in "${trajectories[@]}"; do
     done
   done
   start=$(date +%s.%N)
-  json=$("$bin" identify "${args[@]}" --json -q) || true
+  json=$("$bin" identify "${args[@]}" "$@" --json -q) || true
   took=$(python3 -c "print($(date +%s.%N) - $start)")
   read -r fitted held < <(printf '%s' "$json" | python3 -c \
     'import json,sys; r=json.load(sys.stdin); print(r["mae_rad"], r["validation"]["mae_rad"])')

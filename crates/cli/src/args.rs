@@ -396,6 +396,10 @@ pub struct IdentifyArgs {
     /// from `goal` (closed loop, the default when the records have a controller and a goal).
     #[arg(long)]
     pub open_loop: bool,
+    /// Servo logs: the gearbox's friction: Coulomb and viscous; with the load-dependent part
+    /// (growing with the torque through the mesh); or with a Stribeck peak at rest too.
+    #[arg(long, value_enum, default_value = "load-dependent")]
+    pub friction: FrictionArg,
     /// Servo logs: held-out records, replayed with the identified model and scored (not fitted;
     /// repeatable).
     #[arg(long, value_name = "FILE.csv", requires = "record")]
@@ -404,6 +408,17 @@ pub struct IdentifyArgs {
     /// file for `replay --model` and `simulate --model`.
     #[arg(long, value_name = "M.json")]
     pub save_model: Option<PathBuf>,
+}
+
+/// The friction of a servo's gearbox.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FrictionArg {
+    /// Coulomb and viscous.
+    Coulomb,
+    /// Coulomb, viscous and load-dependent.
+    LoadDependent,
+    /// Coulomb, viscous, load-dependent and a Stribeck peak at rest.
+    Stribeck,
 }
 
 /// How a record's simulation starts.

@@ -57,15 +57,36 @@ fn check_gear(g: f64) -> std::result::Result<f64, &'static str> {
     }
 }
 
-/// Whether the file at `path` is a servo log: it has a `duty` or `goal` column, or describes
-/// its rig (`# load:` / `# controller:`). An unreadable file is not (its reader says why).
+/// Whether the file at `path` is a servo log: its header names a `duty` or `goal` column, or a
+/// comment before it describes the rig (`# load:` / `# controller:`). Only a regular file is
+/// looked into, and only up to its header (a FIFO is read once, by its reader; an unreadable
+/// file is not a servo log and its reader says why).
 pub fn is_servo_log(path: &Path) -> bool {
-    read_table(path).is_ok_and(|t| {
-        t.index("duty").is_some()
-            || t.index("goal").is_some()
-            || t.meta("load").is_some()
-            || t.meta("controller").is_some()
-    })
+    use std::io::BufRead;
+    if !std::fs::metadata(path).is_ok_and(|m| m.is_file()) {
+        return false;
+    }
+    let Ok(file) = std::fs::File::open(path) else {
+        return false;
+    };
+    for line in std::io::BufReader::new(file).lines().take(64) {
+        let Ok(line) = line else {
+            return false;
+        };
+        let line = line.trim().to_ascii_lowercase();
+        if let Some(comment) = line.strip_prefix('#') {
+            let key = comment.split(':').next().unwrap_or("").trim();
+            if key == "load" || key == "controller" {
+                return true;
+            }
+        } else if !line.is_empty() {
+            return line
+                .split([',', ';', '\t'])
+                .map(|h| crate::csv_table::split_unit(h.trim_matches('"')).0)
+                .any(|name| name == "duty" || name == "goal");
+        }
+    }
+    false
 }
 
 /// Reads the servo log at `path` with `rig` as the default rig.

@@ -12,6 +12,8 @@ const TRUTH: ServoMotor = ServoMotor {
     fv_nm_s_per_rad: 0.01,
     mu_motor: 0.4,
     mu_load: 0.1,
+    fs_nm: 0.0,
+    ws_rad_s: 1.0,
 };
 
 /// Counts per turn of the simulated servo's encoder.

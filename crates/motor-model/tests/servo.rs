@@ -15,6 +15,8 @@ fn motor() -> ServoMotor {
         fv_nm_s_per_rad: 0.0,
         mu_motor: 0.0,
         mu_load: 0.0,
+        fs_nm: 0.0,
+        ws_rad_s: 1.0,
     }
 }
 

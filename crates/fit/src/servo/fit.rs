@@ -19,18 +19,71 @@ use crate::servo::records::{Loop, ServoRecord};
 use crate::servo::score::{score_records, ReplayScore};
 
 /// Names of the servo motor's constants, in the order of the fit's parameter vector.
-pub const SERVO_NAMES: [&str; 7] = ["ke", "R", "J", "Fc", "fv", "mu_m", "mu_l"];
+pub const SERVO_NAMES: [&str; 9] = ["ke", "R", "J", "Fc", "fv", "mu_m", "mu_l", "Fs", "ws"];
 /// Their units.
-pub const SERVO_UNITS: [&str; 7] = ["N·m/A", "Ω", "kg·m²", "N·m", "N·m·s/rad", "-", "-"];
+pub const SERVO_UNITS: [&str; 9] = [
+    "N·m/A",
+    "Ω",
+    "kg·m²",
+    "N·m",
+    "N·m·s/rad",
+    "-",
+    "-",
+    "N·m",
+    "rad/s",
+];
+
+/// The constants of `m` in the order of [`SERVO_NAMES`].
+fn constants(m: &ServoMotor) -> [f64; 9] {
+    [
+        m.ke_nm_per_a,
+        m.r_ohm,
+        m.j_kg_m2,
+        m.fc_nm,
+        m.fv_nm_s_per_rad,
+        m.mu_motor,
+        m.mu_load,
+        m.fs_nm,
+        m.ws_rad_s,
+    ]
+}
+
+/// The motor of constants `c` in the order of [`SERVO_NAMES`].
+fn from_constants(c: [f64; 9]) -> ServoMotor {
+    ServoMotor {
+        ke_nm_per_a: c[0],
+        r_ohm: c[1],
+        j_kg_m2: c[2],
+        fc_nm: c[3],
+        fv_nm_s_per_rad: c[4],
+        mu_motor: c[5],
+        mu_load: c[6],
+        fs_nm: c[7],
+        ws_rad_s: c[8],
+    }
+}
 
 /// Which friction the fit gives the motor.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Friction {
-    /// Coulomb and viscous friction (μm and μl held at 0).
+    /// Coulomb and viscous friction (μm, μl and Fs held at 0).
     CoulombViscous,
-    /// Coulomb, viscous and load-dependent friction (μm and μl fitted).
+    /// Coulomb, viscous and load-dependent friction (μm and μl fitted, Fs held at 0).
     #[default]
     LoadDependent,
+    /// All of the above and a Stribeck peak at rest (Fs and ωs fitted too).
+    Stribeck,
+}
+
+impl Friction {
+    /// How many of [`SERVO_NAMES`], from the first, the fit moves; the rest are 0 (ωs: 1).
+    fn fitted(self) -> usize {
+        match self {
+            Friction::CoulombViscous => 5,
+            Friction::LoadDependent => 7,
+            Friction::Stribeck => 9,
+        }
+    }
 }
 
 /// Settings of a servo fit (a builder): the records, how they are replayed, the start.
@@ -68,7 +121,8 @@ pub struct ServoFitResult {
 }
 
 /// A start for a small geared servo at its output (ke 0.5 N·m/A, R 4 Ω, J 1e-3 kg·m², Fc
-/// 0.05 N·m, fv 0.01 N·m·s/rad, μm and μl 0.1): a stall torque of about 0.9 N·m at 7 V.
+/// 0.05 N·m, fv 0.01 N·m·s/rad, μm and μl 0.1, a Stribeck peak Fs 0.02 N·m below ωs
+/// 0.2 rad/s): a stall torque of about 0.9 N·m at 7 V.
 pub const SMALL_SERVO_START: ServoMotor = ServoMotor {
     ke_nm_per_a: 0.5,
     r_ohm: 4.0,
@@ -77,6 +131,8 @@ pub const SMALL_SERVO_START: ServoMotor = ServoMotor {
     fv_nm_s_per_rad: 0.01,
     mu_motor: 0.1,
     mu_load: 0.1,
+    fs_nm: 0.02,
+    ws_rad_s: 0.2,
 };
 
 impl<'a> ServoFit<'a> {
@@ -138,23 +194,17 @@ impl<'a> ServoFit<'a> {
     }
 
     fn n_params(&self) -> usize {
-        match self.friction {
-            Friction::CoulombViscous => 5,
-            Friction::LoadDependent => 7,
-        }
+        self.friction.fitted()
     }
 
+    /// The motor at `θ` (the logarithms of the fitted constants; the others absent).
     fn motor(&self, theta: &[f64]) -> ServoMotor {
-        let at = |k: usize| theta.get(k).map_or(0.0, |v| v.exp());
-        ServoMotor {
-            ke_nm_per_a: at(0),
-            r_ohm: at(1),
-            j_kg_m2: at(2),
-            fc_nm: at(3),
-            fv_nm_s_per_rad: at(4),
-            mu_motor: at(5),
-            mu_load: at(6),
+        let mut c = [0.0; 9];
+        c[8] = 1.0;
+        for (c, t) in c.iter_mut().zip(theta) {
+            *c = t.exp();
         }
+        from_constants(c)
     }
 
     /// The speed channel's weight \[s\] in the fit: a speed error of 1 rad/s counts as a
@@ -165,6 +215,19 @@ impl<'a> ServoFit<'a> {
     pub fn speed_weight_s(mut self, weight: Option<f64>) -> Self {
         self.speed_weight_s = weight;
         self
+    }
+
+    /// The length of each series of residuals in [`ServoFit::residuals`]'s order: each
+    /// record's angle, then its speed where it is fitted.
+    fn series_lengths(&self) -> Vec<usize> {
+        let mut out = Vec::new();
+        for record in self.records {
+            out.push(record.t_s.len());
+            if self.speed_weight_s.is_some() && record.w_rad_s.is_some() {
+                out.push(record.t_s.len());
+            }
+        }
+        out
     }
 
     /// Stacked residuals `q_replayed − q_logged` of every record, with the record each
@@ -238,22 +301,10 @@ impl<'a> ServoFit<'a> {
         self.start
             .validate()
             .map_err(FitError::model("start parameters"))?;
-        let mut start = self.start;
-        start.mu_motor = start.mu_motor.max(1e-6);
-        start.mu_load = start.mu_load.max(1e-6);
-        start.fc_nm = start.fc_nm.max(1e-6);
-        start.fv_nm_s_per_rad = start.fv_nm_s_per_rad.max(1e-6);
-        let theta0: Vec<f64> = [
-            start.ke_nm_per_a,
-            start.r_ohm,
-            start.j_kg_m2,
-            start.fc_nm,
-            start.fv_nm_s_per_rad,
-            start.mu_motor,
-            start.mu_load,
-        ][..self.n_params()]
+        // A size of 0 has no logarithm: the search starts such a term small instead.
+        let theta0: Vec<f64> = constants(&self.start)[..self.n_params()]
             .iter()
-            .map(|v| v.ln())
+            .map(|v| v.max(1e-6).ln())
             .collect();
         let theta0 = self.global_search(&theta0);
         let report = solve(self, &theta0, self.lm)?;
@@ -301,12 +352,12 @@ impl<'a> ServoFit<'a> {
         let half = self.jacobian(theta).and_then(|(r, jac)| {
             let normal = NormalEquations::from_jacobian(r.clone(), &jac);
             let white = uncertainty(&normal)?;
-            let mut nw = NeweyWest::new(theta.len(), r.len() / self.records.len().max(1));
+            let series = self.series_lengths();
+            let mut nw = NeweyWest::new(theta.len(), r.len() / series.len().max(1));
             let mut row = 0;
-            for record in self.records {
-                let n = record.q_rad.len();
+            for n in series {
                 nw.new_series(n);
-                for i in row..row + n {
+                for i in row..(row + n).min(r.len()) {
                     let g: Vec<f64> = (0..theta.len()).map(|k| jac[(i, k)] * r[i]).collect();
                     nw.push(&g);
                 }
@@ -315,16 +366,7 @@ impl<'a> ServoFit<'a> {
             let hac = sandwich_uncertainty(&normal, &nw.finish()?)?;
             at_least(hac, &white).map(|u| u.ci95_half_width)
         });
-        let motor = self.motor(theta);
-        let values = [
-            motor.ke_nm_per_a,
-            motor.r_ohm,
-            motor.j_kg_m2,
-            motor.fc_nm,
-            motor.fv_nm_s_per_rad,
-            motor.mu_motor,
-            motor.mu_load,
-        ];
+        let values = constants(&self.motor(theta));
         (0..self.n_params())
             .map(|k| ParameterEstimate {
                 name: SERVO_NAMES[k],

@@ -7,7 +7,7 @@
 //! output through the gear). With the drive off (`enable` 0) the circuit is open: `τm = 0`.
 //!
 //! The output obeys `J_tot q̈ = τm − fv q̇ − τ_load(q) − τ_f`, `J_tot = J + Σ J_load`, where the
-//! dry friction `|τ_f| ≤ Fc + |μm τm + μl τ_load|` holds the output at rest while it can: a
+//! dry friction `|τ_f| ≤ Fc + Fs exp(−(q̇/ωs)²) + |μm τm + μl τ_load|` holds the output at rest while it can: a
 //! gearbox's friction grows with the torque its mesh transmits. With the rotor and gears `J` on
 //! one side of a rigid mesh and the loads `J_L` on the other, `J q̈ = τm − τ_mesh` and
 //! `J_L q̈ = τ_mesh − τ_load` give `τ_mesh = (J_L τm + J τ_load)/(J + J_L)`; `μm` and `μl` are
@@ -38,6 +38,16 @@ pub struct ServoMotor {
     pub mu_motor: f64,
     /// Load-dependent friction on the load's torque μl \[−\] (module docs).
     pub mu_load: f64,
+    /// Stribeck peak Fs \[N·m\]: dry friction added at rest, fading as `exp(−(q̇/ωs)²)`.
+    #[serde(default)]
+    pub fs_nm: f64,
+    /// Stribeck speed ωs \[rad/s\].
+    #[serde(default = "unit_speed")]
+    pub ws_rad_s: f64,
+}
+
+fn unit_speed() -> f64 {
+    1.0
 }
 
 impl ServoMotor {
@@ -51,6 +61,8 @@ impl ServoMotor {
             ("fv", self.fv_nm_s_per_rad, false),
             ("mu_m", self.mu_motor, false),
             ("mu_l", self.mu_load, false),
+            ("Fs", self.fs_nm, false),
+            ("ws", self.ws_rad_s, true),
         ] {
             let ok = v.is_finite() && if positive { v > 0.0 } else { v >= 0.0 };
             if !ok {

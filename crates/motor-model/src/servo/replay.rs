@@ -6,7 +6,7 @@
 //! equal sub-steps of at most [`ReplaySettings::max_step_s`]. Each sub-step is semi-implicit:
 //! the damping `fv + ke²/R` is taken at the new speed, so that a back-EMF time constant
 //! shorter than the step does not make it unstable, and the dry friction is the torque, within
-//! its bound `Fc + μ|τm|`, that stops the output if that is possible within the step
+//! its bound (`Fc + Fs exp(−(q̇/ωs)²) + |μm τm + μl τ_load|`), that stops the output if that is possible within the step
 //! (stick-slip as MuJoCo's `frictionloss` clips it); the position follows with the new speed.
 
 use crate::error::ModelError;
@@ -182,7 +182,12 @@ pub fn replay(
             };
             let motor_torque = if on { drive - emf_damping * w } else { 0.0 };
             let load = rig.load_torque_nm(q);
-            let dry = m.fc_nm + (m.mu_motor * motor_torque + m.mu_load * load).abs();
+            let stribeck = if m.fs_nm > 0.0 {
+                m.fs_nm * (-(w / m.ws_rad_s).powi(2)).exp()
+            } else {
+                0.0
+            };
+            let dry = m.fc_nm + stribeck + (m.mu_motor * motor_torque + m.mu_load * load).abs();
             // Torque that would stop the output within this sub-step, friction aside.
             let z = j * w / h + drive - load;
             w = if z.abs() <= dry {

@@ -7,7 +7,7 @@ use anyhow::Result;
 use fit::{Drive, KnownConstants};
 use motor_model::MotorParams;
 
-use crate::args::{AxisArg, DriveArg, IdentifyArgs};
+use crate::args::{AxisArg, DriveArg, FrictionArg, IdentifyArgs};
 use crate::errors::BadInput;
 use crate::record_csv::ColumnMap;
 use crate::servo_csv::{self, RigOptions};
@@ -104,6 +104,8 @@ pub struct Settings {
     pub rig: RigOptions,
     /// `--open-loop`: servo logs fitted on their recorded duty.
     pub open_loop: bool,
+    /// `--friction`: the servo's friction model.
+    pub friction: fit::Friction,
     /// `--save-model`: where the identified servo model is written.
     pub save_model: Option<PathBuf>,
 }
@@ -227,6 +229,11 @@ impl Settings {
             folder_limit,
             rig: RigOptions::parse(&a.load, a.controller.as_deref(), a.gear)?,
             open_loop: a.open_loop,
+            friction: match a.friction {
+                FrictionArg::Coulomb => fit::Friction::CoulombViscous,
+                FrictionArg::LoadDependent => fit::Friction::LoadDependent,
+                FrictionArg::Stribeck => fit::Friction::Stribeck,
+            },
             save_model: a.save_model.clone(),
         })
     }

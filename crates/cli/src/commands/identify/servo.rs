@@ -42,6 +42,7 @@ pub fn run(a: &Settings, paths: &[PathBuf], validate: &[PathBuf]) -> Result<()> 
     ));
     let fit = ServoFit::new(&records)
         .mode(mode)
+        .friction(a.friction)
         .fit()
         .map_err(|e| BadInput(e.to_string()))?;
     let held_scores = fit::score_records(&held, fit.motor, Loop::Closed, Default::default())
