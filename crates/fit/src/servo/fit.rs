@@ -5,8 +5,9 @@
 //!
 //! Parameters are fitted as logarithms (each is positive), the Jacobian by central
 //! differences (the stick-slip replay is piecewise smooth). The 95 % intervals are the
-//! sandwich of the Newey–West covariance of the score, each record a series (the angle's
-//! residuals are correlated over many samples), raised to at least the white-noise ones.
+//! sandwich of the Newey–West covariance of the score taken over runs of equal logged values
+//! (each record's angle and speed a series: an encoder's error is one-signed for as long as
+//! its count holds), raised to at least the white-noise ones.
 
 use motor_model::{replay, ReplaySettings, ServoMotor};
 use nalgebra::DMatrix;
@@ -14,7 +15,9 @@ use nalgebra::DMatrix;
 use crate::error::FitError;
 use crate::estimation::lm::{solve, LeastSquares, LmSettings, NormalEquations, Termination};
 use crate::estimation::parameters::ParameterEstimate;
-use crate::estimation::stats::{at_least, sandwich_uncertainty, uncertainty, NeweyWest};
+use crate::estimation::stats::{
+    at_least, equal_runs, newey_west_run_covariance, sandwich_uncertainty, uncertainty,
+};
 use crate::servo::records::{Loop, ServoRecord};
 use crate::servo::score::{score_records, ReplayScore};
 
@@ -217,17 +220,21 @@ impl<'a> ServoFit<'a> {
         self
     }
 
-    /// The length of each series of residuals in [`ServoFit::residuals`]'s order: each
-    /// record's angle, then its speed where it is fitted.
-    fn series_lengths(&self) -> Vec<usize> {
-        let mut out = Vec::new();
+    /// The length of each series of residuals in [`ServoFit::residuals`]'s order (each
+    /// record's angle, then its speed where it is fitted) and the runs of equal logged values
+    /// within them ([`equal_runs`]): an encoder's count held while the output creeps, or
+    /// stuck, errs the same way for the whole run.
+    fn series_runs(&self) -> (Vec<usize>, Vec<usize>) {
+        let (mut series, mut runs) = (Vec::new(), Vec::new());
         for record in self.records {
-            out.push(record.t_s.len());
-            if self.speed_weight_s.is_some() && record.w_rad_s.is_some() {
-                out.push(record.t_s.len());
+            series.push(record.q_rad.len());
+            runs.extend(equal_runs(&record.q_rad));
+            if let (Some(_), Some(w)) = (self.speed_weight_s, &record.w_rad_s) {
+                series.push(w.len());
+                runs.extend(equal_runs(w));
             }
         }
-        out
+        (series, runs)
     }
 
     /// Stacked residuals `q_replayed − q_logged` of every record, with the record each
@@ -352,18 +359,9 @@ impl<'a> ServoFit<'a> {
         let half = self.jacobian(theta).and_then(|(r, jac)| {
             let normal = NormalEquations::from_jacobian(r.clone(), &jac);
             let white = uncertainty(&normal)?;
-            let series = self.series_lengths();
-            let mut nw = NeweyWest::new(theta.len(), r.len() / series.len().max(1));
-            let mut row = 0;
-            for n in series {
-                nw.new_series(n);
-                for i in row..(row + n).min(r.len()) {
-                    let g: Vec<f64> = (0..theta.len()).map(|k| jac[(i, k)] * r[i]).collect();
-                    nw.push(&g);
-                }
-                row += n;
-            }
-            let hac = sandwich_uncertainty(&normal, &nw.finish()?)?;
+            let (series, runs) = self.series_runs();
+            let score = newey_west_run_covariance(&r, &jac, &series, &runs)?;
+            let hac = sandwich_uncertainty(&normal, &score)?;
             at_least(hac, &white).map(|u| u.ci95_half_width)
         });
         let values = constants(&self.motor(theta));

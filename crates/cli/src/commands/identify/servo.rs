@@ -74,6 +74,13 @@ pub fn run(a: &Settings, paths: &[PathBuf], validate: &[PathBuf]) -> Result<()> 
     } else {
         None
     };
+    // After the global search, a gradient step that lowers nothing leaves the search's best
+    // point: the replay of a stick-slip rig is not smooth enough there for LM to improve on it.
+    let termination = if fit.termination == fit::Termination::Stalled {
+        "the global search's best point (no Levenberg-Marquardt step lowered the cost further)"
+    } else {
+        fit.termination.text()
+    };
     let mut model = ModelFile::new(records[0].rig(fit.motor));
     model.ci95 = fit
         .estimates
@@ -96,7 +103,7 @@ pub fn run(a: &Settings, paths: &[PathBuf], validate: &[PathBuf]) -> Result<()> 
             "method": "servo",
             "loop": if a.open_loop { "open" } else { "closed" },
             "parameters": params,
-            "termination": fit.termination.text(),
+            "termination": termination,
             "iterations": fit.iterations,
             "records": scores_json(&records, &fit.scores),
             "mae_rad": fit.mae_rad,
@@ -117,7 +124,7 @@ pub fn run(a: &Settings, paths: &[PathBuf], validate: &[PathBuf]) -> Result<()> 
             "servo motor at the output ({} records, {} loop; {})",
             records.len(),
             if a.open_loop { "open" } else { "closed" },
-            fit.termination.text()
+            termination
         )?;
         for e in &fit.estimates {
             match e.ci95 {
