@@ -597,7 +597,7 @@ pub struct ReplayArgs {
     #[arg(long, value_name = "N")]
     pub gear: Option<f64>,
     /// Replay from the recorded duty or voltage (open loop) even where the model has a
-    /// controller and the record a goal.
+    /// controller and the record a goal (a model identified with --open-loop replays so anyway).
     #[arg(long)]
     pub open_loop: bool,
     /// Write figures: logged and replayed position and their difference, per record.

@@ -82,7 +82,10 @@ fn declared_outputs(command: &Command) -> Vec<output::Declared> {
         Command::Emps(a) => outputs.extend(a.plot.iter().map(|p| dir("--plot", p))),
         Command::Identify(a) => {
             outputs.extend(a.plot.iter().map(|p| dir("--plot", p)));
-            outputs.extend(a.save_model.iter().map(|p| file("--save-model", p)));
+            outputs.extend(a.save_model.iter().map(|p| output::Declared::Document {
+                flag: "--save-model",
+                path: p.clone(),
+            }));
             // The summaries go into the batch folder; a missing folder is the batch's own error.
             if let Some(batch) = a.batch.as_ref().filter(|d| d.is_dir()) {
                 for name in ["summary.csv", "summary.json"] {

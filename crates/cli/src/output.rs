@@ -43,6 +43,15 @@ pub enum Declared {
         /// The path as given.
         path: PathBuf,
     },
+    /// A document the command writes and other commands read back (`--save-model M.json`):
+    /// only a regular file is replaced or a new name taken; a symbolic link, FIFO or device of
+    /// that name is refused (following it would replace another file, or wait for a reader).
+    Document {
+        /// The option that named it (`--save-model`).
+        flag: &'static str,
+        /// The path as given.
+        path: PathBuf,
+    },
     /// A folder the command will write files into, created if missing (`--plot DIR`).
     Dir {
         /// The option that named it (`--plot`, `--out`).
@@ -59,6 +68,14 @@ pub fn check(outputs: &[Declared]) -> Result<()> {
     for declared in outputs {
         let (flag, path, verdict) = match declared {
             Declared::File { flag, path } => (flag, path, resolve(path).map(|_| ())),
+            Declared::Document { flag, path } => (
+                flag,
+                path,
+                match std::fs::symlink_metadata(path) {
+                    Ok(meta) if !meta.file_type().is_file() => Err(not_regular(&meta)),
+                    _ => resolve(path).map(|_| ()),
+                },
+            ),
             Declared::Dir { flag, path } => (
                 flag,
                 path,

@@ -57,6 +57,45 @@ fn check_gear(g: f64) -> std::result::Result<f64, &'static str> {
     }
 }
 
+/// `output`, unless it is one of `inputs` (the same file, by any name): writing there would
+/// replace a log with the model.
+pub fn not_an_input<'a>(
+    output: &Path,
+    inputs: impl Iterator<Item = &'a std::path::PathBuf>,
+) -> Result<std::path::PathBuf> {
+    if let Ok(out) = std::fs::canonicalize(output) {
+        for input in inputs {
+            if std::fs::canonicalize(input).is_ok_and(|i| i == out) {
+                return Err(BadInput(format!(
+                    "--save-model {}: it is the record {}; name a new file for the model",
+                    output.display(),
+                    input.display()
+                ))
+                .into());
+            }
+        }
+    }
+    Ok(output.to_path_buf())
+}
+
+/// Each of `paths` once: a record given twice, or both fitted and held out, is bad input.
+pub fn distinct<'a>(paths: impl Iterator<Item = &'a std::path::PathBuf>) -> Result<()> {
+    let mut seen: Vec<(std::path::PathBuf, &std::path::PathBuf)> = Vec::new();
+    for p in paths {
+        let key = std::fs::canonicalize(p).unwrap_or_else(|_| p.clone());
+        if let Some((_, first)) = seen.iter().find(|(k, _)| *k == key) {
+            return Err(BadInput(format!(
+                "{} is given twice (also as {}): list each record once, fitted (--record) or held out (--validate)",
+                p.display(),
+                first.display()
+            ))
+            .into());
+        }
+        seen.push((key, p));
+    }
+    Ok(())
+}
+
 /// Whether the file at `path` is a servo log: its header names a `duty` or `goal` column, or a
 /// comment before it describes the rig (`# load:` / `# controller:`). Only a regular file is
 /// looked into, and only up to its header (a FIFO is read once, by its reader; an unreadable
@@ -73,7 +112,10 @@ pub fn is_servo_log(path: &Path) -> bool {
         let Ok(line) = line else {
             return false;
         };
-        let line = line.trim().to_ascii_lowercase();
+        let line = line
+            .trim_start_matches('\u{feff}')
+            .trim()
+            .to_ascii_lowercase();
         if let Some(comment) = line.strip_prefix('#') {
             let key = comment.split(':').next().unwrap_or("").trim();
             if key == "load" || key == "controller" {
@@ -134,6 +176,15 @@ pub fn read_servo(path: &Path, rig: &RigOptions) -> Result<ServoRecord> {
             .into());
         }
     }
+    if let Some(v) = &supply {
+        if let Some(k) = v.iter().position(|v| *v < 0.0) {
+            return Err(BadInput(format!(
+                "{shown}:{}: supply {} V is negative; give the supply's magnitude (the duty carries the sign)",
+                table.lines[k], v[k]
+            ))
+            .into());
+        }
+    }
     let enable = match enable {
         None => None,
         Some(e) => {
@@ -178,7 +229,11 @@ pub fn read_servo(path: &Path, rig: &RigOptions) -> Result<ServoRecord> {
     })
 }
 
-/// Stamps strictly increasing: the line and message of the first that is not.
+/// Largest gap between two stamps, in median spacings of the log.
+const MAX_GAP_SPACINGS: f64 = 1000.0;
+
+/// Stamps strictly increasing and without a gap of more than [`MAX_GAP_SPACINGS`]: the line
+/// and message of the first that breaks it.
 fn check_stamps(table: &Table, t: &[f64]) -> std::result::Result<(), (usize, String)> {
     for (k, w) in t.windows(2).enumerate() {
         if w[1] <= w[0] {
@@ -198,6 +253,25 @@ fn check_stamps(table: &Table, t: &[f64]) -> std::result::Result<(), (usize, Str
     }
     if t.len() < 2 {
         return Err((table.header_line, "fewer than two samples".into()));
+    }
+    // A gap far beyond the log's own spacing is where it stopped: the drive's input is unknown
+    // over it, and holding it would make the replay take as long as the gap is long.
+    let mut spacing: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    spacing.sort_by(f64::total_cmp);
+    let median = spacing[spacing.len() / 2];
+    for (k, w) in t.windows(2).enumerate() {
+        if w[1] - w[0] > MAX_GAP_SPACINGS * median {
+            return Err((
+                table.lines[k + 1],
+                format!(
+                    "time stamp {} s comes {:.6} s after the previous one, {:.0} times the log's median spacing ({:.6} s): the log stopped here; split it into two records",
+                    w[1],
+                    w[1] - w[0],
+                    (w[1] - w[0]) / median,
+                    median
+                ),
+            ));
+        }
     }
     Ok(())
 }
@@ -222,6 +296,18 @@ fn own_rig(
     } else {
         own_loads
     };
+    for key in ["controller", "gear"] {
+        let count = table
+            .metadata
+            .iter()
+            .filter(|(k, _)| k.eq_ignore_ascii_case(key))
+            .count();
+        if count > 1 {
+            return Err(format!(
+                "{count} `# {key}:` lines; a record has one {key} (keep the right line)"
+            ));
+        }
+    }
     let controller = match table.meta("controller") {
         Some(c) => Some(
             c.parse::<Controller>()

@@ -203,3 +203,111 @@ fn bad_servo_input_is_one_line_with_exit_2() {
         "not a model file",
     );
 }
+
+#[test]
+fn the_model_file_goes_only_where_it_replaces_nothing_else() {
+    let dir = scratch("servo-save");
+    let meta = "# load: pendulum:m=0.49,l=0.1\n# controller: dynamixel-xl330:kp=100\n";
+    let good = log(&dir, "good.csv", meta, HEADER, None);
+    let g = good.to_str().unwrap();
+    let target = dir.join("target.txt");
+    std::fs::write(&target, "keep").unwrap();
+    let link = dir.join("link.json");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    let fifo = dir.join("fifo.json");
+    common::make_fifo(&fifo);
+    for (out, needle) in [
+        (link.to_str().unwrap(), "a symbolic link"),
+        (fifo.to_str().unwrap(), "not a regular file"),
+        ("/dev/null", "not a regular file"),
+        (g, "it is the record"),
+    ] {
+        assert_bad_input(&["identify", "--record", g, "--save-model", out], needle);
+    }
+    assert_eq!(std::fs::read_to_string(&target).unwrap(), "keep");
+    assert!(std::fs::read_to_string(&good)
+        .unwrap()
+        .starts_with("# load"));
+    assert_bad_input(&["identify", "--record", g, "--validate", g], "given twice");
+    // A fit that is not a result (a still output explains nothing) leaves a saved model alone.
+    let still = log(&dir, "still.csv", meta, HEADER, None);
+    let keep = dir.join("keep.json");
+    std::fs::write(&keep, "previous model").unwrap();
+    let out = motorid(&[
+        "identify",
+        "--record",
+        still.to_str().unwrap(),
+        "--save-model",
+        keep.to_str().unwrap(),
+        "-q",
+    ]);
+    assert_eq!(out.status.code(), Some(3), "{}", stderr(&out));
+    assert_eq!(std::fs::read_to_string(&keep).unwrap(), "previous model");
+}
+
+#[test]
+fn logs_that_stop_or_contradict_themselves_are_refused() {
+    let dir = scratch("servo-meta");
+    let meta = "# load: pendulum:m=0.49,l=0.1\n# controller: dynamixel-xl330:kp=100\n";
+    let mut body: String = (0..20)
+        .map(|k| format!("{},0,0.1,7.3,0.2,1\n", k as f64 * 0.005))
+        .collect();
+    body.push_str("1000,0,0.1,7.3,0.2,1\n");
+    let gap = log(&dir, "gap.csv", meta, HEADER, Some(&body));
+    assert_bad_input(
+        &["identify", "--record", gap.to_str().unwrap()],
+        "gap.csv:24: time stamp 1000 s comes",
+    );
+    let two = log(
+        &dir,
+        "two.csv",
+        "# controller: dynamixel-xl330:kp=100\n# controller: dynamixel-xl330:kp=200\n",
+        HEADER,
+        None,
+    );
+    assert_bad_input(
+        &["identify", "--record", two.to_str().unwrap()],
+        "2 `# controller:` lines",
+    );
+    let supply = log(
+        &dir,
+        "supply.csv",
+        meta,
+        HEADER,
+        Some("0,0,0.1,-7.3,0,1\n0.005,0,0.1,7.3,0,1\n"),
+    );
+    assert_bad_input(
+        &["identify", "--record", supply.to_str().unwrap()],
+        "supply.csv:4: supply -7.3 V is negative",
+    );
+    // A byte-order mark before the metadata: still a servo log.
+    let bom = log(
+        &dir,
+        "bom.csv",
+        &format!("\u{feff}{meta}"),
+        HEADER,
+        Some("0,0,1.5,7.3,0,1\n0.005,0,0.1,7.3,0,1\n"),
+    );
+    assert_bad_input(
+        &["identify", "--record", bom.to_str().unwrap()],
+        "duty 1.5 is outside",
+    );
+    // A model file's controller is checked as the option is.
+    let model = dir.join("kp.json");
+    std::fs::write(
+        &model,
+        r#"{"format":"motorid-model","version":1,"rig":{"motor":{"ke_nm_per_a":0.3,"r_ohm":2,"j_kg_m2":0.002,"fc_nm":0,"fv_nm_s_per_rad":0,"mu_motor":0,"mu_load":0},"gear":1,"loads":[],"controller":{"kp":-100,"kd":0,"gain":0.002877,"max_duty":1,"preset":"dynamixel-xl330"}}}"#,
+    )
+    .unwrap();
+    let good = log(&dir, "good.csv", meta, HEADER, None);
+    assert_bad_input(
+        &[
+            "replay",
+            "--model",
+            model.to_str().unwrap(),
+            "--record",
+            good.to_str().unwrap(),
+        ],
+        "kp = -100",
+    );
+}

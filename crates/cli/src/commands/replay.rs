@@ -18,6 +18,7 @@ use crate::servo_report::{mean_mae, plot_replays, print_scores, scores_json};
 #[derive(Debug, Clone)]
 pub struct Settings {
     model: ModelFile,
+    path: String,
     records: Vec<PathBuf>,
     rig: RigOptions,
     open_loop: bool,
@@ -53,6 +54,7 @@ impl Settings {
         };
         Ok(Settings {
             model,
+            path: shown.to_string(),
             records: a.record.clone(),
             rig,
             open_loop: a.open_loop,
@@ -78,9 +80,11 @@ pub fn run(s: &Settings) -> Result<()> {
     let motor = s.model.rig.motor;
     let traces = records
         .iter()
-        .map(|r| fit::replay_record(r, motor, mode, Default::default()))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| BadInput(e.to_string()))?;
+        .map(|r| {
+            fit::replay_record(r, motor, mode, Default::default())
+                .map_err(|e| BadInput(format!("{}: replayed with {}: {e}", r.name, s.path)))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
     let scores: Vec<fit::ReplayScore> = records
         .iter()
         .zip(&traces)

@@ -102,6 +102,10 @@ pub struct ServoFit<'a> {
     speed_weight_s: Option<f64>,
 }
 
+/// Most sub-steps one replay of all the records may take in a fit: 20 times the eight XL330
+/// logs' 1e5 (a fit of them takes about 2.5 s on 2 cores; of this many, under a minute).
+const MAX_SUBSTEPS_PER_REPLAY: f64 = 2e6;
+
 /// Seed of the global search's random draws.
 const SEARCH_SEED: u64 = 0x5e4b0;
 
@@ -308,6 +312,36 @@ impl<'a> ServoFit<'a> {
         self.start
             .validate()
             .map_err(FitError::model("start parameters"))?;
+        let substeps: f64 = self
+            .records
+            .iter()
+            .flat_map(|r| r.t_s.windows(2))
+            .map(|w| ((w[1] - w[0]) / self.replay.max_step_s).ceil())
+            .sum();
+        if substeps > MAX_SUBSTEPS_PER_REPLAY {
+            return Err(FitError::BadData {
+                series: "servo records".into(),
+                reason: format!(
+                    "one replay of the records takes {substeps:.0} sub-steps of {} s, and a fit replays them thousands of times (at most {MAX_SUBSTEPS_PER_REPLAY:.0} a replay): are the time stamps in seconds? Fit a shorter stretch of the logs",
+                    self.replay.max_step_s
+                ),
+            });
+        }
+        let start = self.motor(
+            &constants(&self.start)[..self.n_params()]
+                .iter()
+                .map(|v| v.max(1e-6).ln())
+                .collect::<Vec<_>>(),
+        );
+        for record in self.records {
+            let run = record.run(self.mode)?;
+            replay(&record.rig(start), &run, self.replay).map_err(|e| FitError::BadData {
+                series: record.name.clone(),
+                reason: format!(
+                    "the replay from the fit's start fails ({e}): check the loads, the controller and the input columns"
+                ),
+            })?;
+        }
         // A size of 0 has no logarithm: the search starts such a term small instead.
         let theta0: Vec<f64> = constants(&self.start)[..self.n_params()]
             .iter()
@@ -370,11 +404,12 @@ impl<'a> ServoFit<'a> {
                 name: SERVO_NAMES[k],
                 unit: SERVO_UNITS[k],
                 value: values[k],
+                // An interval reaching 0 or infinity in a positive constant is none.
                 ci95: half
                     .as_ref()
                     .and_then(|h| h.get(k))
-                    .filter(|h| h.is_finite())
-                    .map(|h| [(theta[k] - h).exp(), (theta[k] + h).exp()]),
+                    .map(|h| [(theta[k] - h).exp(), (theta[k] + h).exp()])
+                    .filter(|[lo, hi]| *lo > 0.0 && hi.is_finite()),
             })
             .collect()
     }

@@ -96,6 +96,29 @@ impl Controller {
     }
 }
 
+impl Controller {
+    /// Refuses a value outside its table's domain, or a preset of another name, as
+    /// [`Controller::from_str`] does.
+    pub fn check(&self) -> Result<(), ModelError> {
+        let failed = |reason: String| ModelError::RigSpec {
+            what: "controller",
+            spec: self.to_string(),
+            reason,
+        };
+        if let Some(name) = &self.preset {
+            if name != "dynamixel-xl330" {
+                return Err(failed(format!("unknown preset `{name}`")));
+            }
+        }
+        for (p, v) in PD.iter().zip([self.kp, self.kd, self.gain, self.max_duty]) {
+            p.domain
+                .check(p.key, v)
+                .map_err(|e| failed(e.to_string()))?;
+        }
+        Ok(())
+    }
+}
+
 impl fmt::Display for Controller {
     /// The form [`Controller::from_str`] reads (a preset as its preset).
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {

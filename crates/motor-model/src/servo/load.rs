@@ -133,6 +133,18 @@ impl Load {
         }
     }
 
+    /// Refuses a value outside its table's domain, as [`Load::from_str`] does.
+    pub fn check(&self) -> Result<(), ModelError> {
+        for (p, v) in self.table().iter().zip(self.values()) {
+            p.domain.check(p.key, v).map_err(|e| ModelError::RigSpec {
+                what: "load",
+                spec: self.to_string(),
+                reason: e.to_string(),
+            })?;
+        }
+        Ok(())
+    }
+
     fn name(&self) -> &'static str {
         match self {
             Load::Pendulum { .. } => "pendulum",

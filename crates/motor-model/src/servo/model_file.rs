@@ -30,6 +30,10 @@ pub struct ModelFile {
     /// The records the model was identified from (file names as given), for the reader.
     #[serde(default)]
     pub identified_from: Vec<String>,
+    /// Whether it was identified on the recorded duty (open loop): a replay then defaults to
+    /// open loop too.
+    #[serde(default)]
+    pub open_loop: bool,
 }
 
 impl ModelFile {
@@ -41,10 +45,12 @@ impl ModelFile {
             rig,
             ci95: BTreeMap::new(),
             identified_from: Vec::new(),
+            open_loop: false,
         }
     }
 
-    /// Refuses a document of another format or version, or an invalid rig.
+    /// Refuses a document of another format or version, or an invalid rig (its motor, each
+    /// load and the controller checked as their options are).
     pub fn check(&self) -> Result<(), ModelError> {
         if self.format != MODEL_FILE_FORMAT {
             return Err(ModelError::RigSpec {
@@ -62,6 +68,13 @@ impl ModelFile {
                 ),
             });
         }
-        self.rig.validate()
+        self.rig.validate()?;
+        for load in &self.rig.loads {
+            load.check()?;
+        }
+        match &self.rig.controller {
+            Some(c) => c.check(),
+            None => Ok(()),
+        }
     }
 }

@@ -163,6 +163,7 @@ impl Settings {
                 || a.open_loop
                 || a.record.iter().any(|p| servo_csv::is_servo_log(p)))
         {
+            servo_csv::distinct(a.record.iter().chain(&a.validate))?;
             Source::Servo {
                 records: a.record.clone(),
                 validate: a.validate.clone(),
@@ -228,13 +229,17 @@ impl Settings {
             initial_state: settings::initial_state(a.initial_state),
             folder_limit,
             rig: RigOptions::parse(&a.load, a.controller.as_deref(), a.gear)?,
+            save_model: a
+                .save_model
+                .as_deref()
+                .map(|m| servo_csv::not_an_input(m, a.record.iter().chain(&a.validate)))
+                .transpose()?,
             open_loop: a.open_loop,
             friction: match a.friction {
                 FrictionArg::Coulomb => fit::Friction::CoulombViscous,
                 FrictionArg::LoadDependent => fit::Friction::LoadDependent,
                 FrictionArg::Stribeck => fit::Friction::Stribeck,
             },
-            save_model: a.save_model.clone(),
         })
     }
 }

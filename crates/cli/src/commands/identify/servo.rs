@@ -44,7 +44,12 @@ pub fn run(a: &Settings, paths: &[PathBuf], validate: &[PathBuf]) -> Result<()> 
         .mode(mode)
         .friction(a.friction)
         .fit()
-        .map_err(|e| BadInput(e.to_string()))?;
+        .map_err(|e| match e {
+            fit::FitError::Solver(why) => {
+                anyhow::Error::from(NotConverged(format!("the fit failed: {why}")))
+            }
+            other => BadInput(other.to_string()).into(),
+        })?;
     let held_scores = fit::score_records(&held, fit.motor, Loop::Closed, Default::default())
         .map_err(|e| BadInput(e.to_string()))?;
     drop(phases);
@@ -70,7 +75,16 @@ pub fn run(a: &Settings, paths: &[PathBuf], validate: &[PathBuf]) -> Result<()> 
             constant_mae * 1e3
         ))
     } else if fit.estimates.iter().any(|e| e.ci95.is_none()) {
-        Some("the 95 % intervals cannot be computed: the records do not determine every constant (give records with faster motion, or with the drive off)".into())
+        let open: Vec<&str> = fit
+            .estimates
+            .iter()
+            .filter(|e| e.ci95.is_none())
+            .map(|e| e.name)
+            .collect();
+        Some(format!(
+            "the 95 % intervals of {} cannot be computed: the records do not determine them (the motor's constants need motion with the drive on; friction and inertia, motion of either kind; or choose a simpler --friction)",
+            open.join(", ")
+        ))
     } else {
         None
     };
@@ -88,6 +102,7 @@ pub fn run(a: &Settings, paths: &[PathBuf], validate: &[PathBuf]) -> Result<()> 
         .filter_map(|e| e.ci95.map(|ci| (e.name.to_string(), ci)))
         .collect();
     model.identified_from = records.iter().map(|r| r.name.clone()).collect();
+    model.open_loop = a.open_loop;
     if a.json {
         let params: serde_json::Map<String, serde_json::Value> = fit
             .estimates
@@ -159,7 +174,8 @@ pub fn run(a: &Settings, paths: &[PathBuf], validate: &[PathBuf]) -> Result<()> 
             )?;
         }
     }
-    if let Some(path) = &a.save_model {
+    // A fit that is not a result is not saved: it would replace a model that is one.
+    if let (Some(path), None) = (&a.save_model, &failure) {
         let text = serde_json::to_string_pretty(&model)?;
         crate::output::write_with(path, |out| Ok(out.write_all(text.as_bytes())?))?;
         if !a.quiet {
