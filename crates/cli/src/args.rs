@@ -378,20 +378,8 @@ pub struct IdentifyArgs {
     /// of a longer run).
     #[arg(long, value_enum, default_value = "auto")]
     pub initial_state: InitialStateArg,
-    /// Servo logs: a known load on the output, not fitted (repeatable): pendulum:m=KG,l=M[,arm=KG]
-    /// (q = 0 hanging down), inertia:j=KG_M2, spring:k=NM_PER_RAD[,q0=RAD], constant:t=NM. A
-    /// record's own `# load:` lines win.
-    #[arg(long, value_name = "KIND:KEY=VALUE,...")]
-    pub load: Vec<String>,
-    /// Servo logs: the servo's own position loop, p:kp=..,gain=..,max_duty=..,
-    /// pd:kp=..,kd=..,gain=..,max_duty=.. or a preset (dynamixel-xl330:kp=N). A record's own
-    /// `# controller:` line wins.
-    #[arg(long, value_name = "KIND:KEY=VALUE,...")]
-    pub controller: Option<String>,
-    /// Servo logs: positions are on the output of an N:1 gearbox (the motor's own constants are
-    /// reported beside the output's). A record's own `# gear:` line wins.
-    #[arg(long, value_name = "N")]
-    pub gear: Option<f64>,
+    #[command(flatten)]
+    pub rig: RigArgs,
     /// Servo logs: fit on the recorded duty (open loop) instead of replaying the position loop
     /// from `goal` (closed loop, the default when the records have a controller and a goal).
     #[arg(long)]
@@ -582,6 +570,26 @@ pub struct ReplayArgs {
     /// Servo logs to replay (repeatable).
     #[arg(long, value_name = "FILE.csv", required = true)]
     pub record: Vec<PathBuf>,
+    #[command(flatten)]
+    pub rig: RigArgs,
+    /// Replay from the recorded duty or voltage (open loop) even where the model has a
+    /// controller and the record a goal (a model identified with --open-loop replays so anyway).
+    #[arg(long)]
+    pub open_loop: bool,
+    /// Write figures: logged and replayed position and their difference, per record.
+    #[arg(long, value_name = "DIR")]
+    pub plot: Option<PathBuf>,
+    /// No progress messages or warnings on standard error.
+    #[arg(long, short = 'q')]
+    pub quiet: bool,
+    /// Print one JSON object instead of tables.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// The rig of servo logs, as `identify` and `replay` take it.
+#[derive(Debug, Args)]
+pub struct RigArgs {
     /// Servo logs: a known load on the output, not fitted (repeatable): pendulum:m=KG,l=M[,arm=KG]
     /// (q = 0 hanging down), inertia:j=KG_M2, spring:k=NM_PER_RAD[,q0=RAD], constant:t=NM. A
     /// record's own `# load:` lines win.
@@ -596,17 +604,4 @@ pub struct ReplayArgs {
     /// reported beside the output's). A record's own `# gear:` line wins.
     #[arg(long, value_name = "N")]
     pub gear: Option<f64>,
-    /// Replay from the recorded duty or voltage (open loop) even where the model has a
-    /// controller and the record a goal (a model identified with --open-loop replays so anyway).
-    #[arg(long)]
-    pub open_loop: bool,
-    /// Write figures: logged and replayed position and their difference, per record.
-    #[arg(long, value_name = "DIR")]
-    pub plot: Option<PathBuf>,
-    /// No progress messages or warnings on standard error.
-    #[arg(long, short = 'q')]
-    pub quiet: bool,
-    /// Print one JSON object instead of tables.
-    #[arg(long)]
-    pub json: bool,
 }

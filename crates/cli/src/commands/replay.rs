@@ -42,7 +42,7 @@ impl Settings {
         model
             .check()
             .map_err(|e| BadInput(format!("{shown}: {e}")))?;
-        let given = RigOptions::parse(&a.load, a.controller.as_deref(), a.gear)?;
+        let given = RigOptions::parse(&a.rig.load, a.rig.controller.as_deref(), a.rig.gear)?;
         let rig = RigOptions {
             loads: if given.loads.is_empty() {
                 model.rig.loads.clone()

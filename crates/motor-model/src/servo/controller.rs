@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::ModelError;
 use crate::servo::load::spec;
-use crate::sim::effects::{Domain, ParamSpec, SpecArgs};
+use crate::sim::effects::{parse_kind, Domain, ParamSpec};
 
 /// Gain of a Dynamixel XL330's position loop per unit of its register `kp` \[1/rad\]:
 /// `4096/(2π · 256 · 885)` — 4096 counts a turn, the divisor 256 that the BAM project observed
@@ -144,29 +144,7 @@ impl FromStr for Controller {
     /// Parses `p:kp=..,gain=..,max_duty=..`, `pd:kp=..,kd=..,gain=..,max_duty=..` or a
     /// preset, `dynamixel-xl330:kp=N` (gain [`XL330_GAIN_PER_RAD`], full duty).
     fn from_str(text: &str) -> Result<Self, ModelError> {
-        let text = text.trim();
-        let failed = |reason| ModelError::RigSpec {
-            what: "controller",
-            spec: text.to_string(),
-            reason,
-        };
-        let (name, body) = text.split_once(':').unwrap_or((text, ""));
-        let name = name.trim();
-        let (_, table) = KINDS.iter().find(|(n, _)| *n == name).ok_or_else(|| {
-            let known: Vec<&str> = KINDS.iter().map(|(n, _)| *n).collect();
-            failed(format!(
-                "unknown controller `{name}`; known: {}",
-                known.join(", ")
-            ))
-        })?;
-        let v = SpecArgs::parse(body)
-            .and_then(|a| a.values(table, "this controller"))
-            .map_err(failed)?;
-        for (p, value) in table.iter().zip(&v) {
-            p.domain
-                .check(p.key, *value)
-                .map_err(|e| failed(e.to_string()))?;
-        }
+        let (name, v) = parse_kind(text, "controller", &KINDS)?;
         Ok(match name {
             "p" => Controller {
                 kp: v[0],

@@ -9,7 +9,7 @@ use std::str::FromStr;
 use serde::{Deserialize, Serialize};
 
 use crate::error::ModelError;
-use crate::sim::effects::{Domain, ParamSpec, SpecArgs};
+use crate::sim::effects::{parse_kind, Domain, ParamSpec};
 
 /// Standard gravity g \[m/s²\] (CGPM 1901).
 pub const STANDARD_GRAVITY_M_S2: f64 = 9.80665;
@@ -197,29 +197,7 @@ impl FromStr for Load {
 
     /// Parses `pendulum:m=0.49,l=0.1`, `inertia:j=…`, `spring:k=…[,q0=…]`, `constant:t=…`.
     fn from_str(text: &str) -> Result<Self, ModelError> {
-        let text = text.trim();
-        let failed = |reason| ModelError::RigSpec {
-            what: "load",
-            spec: text.to_string(),
-            reason,
-        };
-        let (name, body) = text.split_once(':').unwrap_or((text, ""));
-        let name = name.trim();
-        let (_, table) = KINDS.iter().find(|(n, _)| *n == name).ok_or_else(|| {
-            let known: Vec<&str> = KINDS.iter().map(|(n, _)| *n).collect();
-            failed(format!(
-                "unknown load `{name}`; known: {}",
-                known.join(", ")
-            ))
-        })?;
-        let v = SpecArgs::parse(body)
-            .and_then(|a| a.values(table, "this load"))
-            .map_err(failed)?;
-        for (p, value) in table.iter().zip(&v) {
-            p.domain
-                .check(p.key, *value)
-                .map_err(|e| failed(e.to_string()))?;
-        }
+        let (name, v) = parse_kind(text, "load", &KINDS)?;
         Ok(match name {
             "pendulum" => Load::Pendulum {
                 mass_kg: v[0],

@@ -155,9 +155,9 @@ impl Settings {
                 torque_constant,
             }
         } else if !a.record.is_empty()
-            && (!a.load.is_empty()
-                || a.controller.is_some()
-                || a.gear.is_some()
+            && (!a.rig.load.is_empty()
+                || a.rig.controller.is_some()
+                || a.rig.gear.is_some()
                 || a.save_model.is_some()
                 || !a.validate.is_empty()
                 || a.open_loop
@@ -228,7 +228,7 @@ impl Settings {
             decimation: a.decimation,
             initial_state: settings::initial_state(a.initial_state),
             folder_limit,
-            rig: RigOptions::parse(&a.load, a.controller.as_deref(), a.gear)?,
+            rig: RigOptions::parse(&a.rig.load, a.rig.controller.as_deref(), a.rig.gear)?,
             save_model: a
                 .save_model
                 .as_deref()

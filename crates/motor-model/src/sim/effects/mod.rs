@@ -27,7 +27,7 @@ pub use cogging::CoggingTorque;
 pub use drag::QuadraticDrag;
 pub use saturation::InductanceSaturation;
 pub use sensor_lag::CurrentSensorLag;
-pub(crate) use spec::SpecArgs;
+pub(crate) use spec::{parse_kind, SpecArgs};
 pub use spec::{Domain, ParamSpec};
 pub use stribeck::StribeckFriction;
 pub use thermal::{ThermalDrift, COPPER_ALPHA_PER_K};

@@ -205,3 +205,37 @@ impl<'a> SpecArgs<'a> {
         Ok(out)
     }
 }
+
+/// Parses `name:key=value,...` against `kinds` (each name with its table): the kind's name and
+/// its values in table order, each checked against its domain. `what` names the family in
+/// messages (`load`, `controller`).
+pub(crate) fn parse_kind<'k>(
+    text: &str,
+    what: &'static str,
+    kinds: &[(&'k str, &'static [ParamSpec])],
+) -> Result<(&'k str, Vec<f64>), ModelError> {
+    let text = text.trim();
+    let failed = |reason| ModelError::RigSpec {
+        what,
+        spec: text.to_string(),
+        reason,
+    };
+    let (name, body) = text.split_once(':').unwrap_or((text, ""));
+    let name = name.trim();
+    let (kind, table) = kinds.iter().find(|(n, _)| *n == name).ok_or_else(|| {
+        let known: Vec<&str> = kinds.iter().map(|(n, _)| *n).collect();
+        failed(format!(
+            "unknown {what} `{name}`; known: {}",
+            known.join(", ")
+        ))
+    })?;
+    let v = SpecArgs::parse(body)
+        .and_then(|a| a.values(table, &format!("this {what}")))
+        .map_err(failed)?;
+    for (p, value) in table.iter().zip(&v) {
+        p.domain
+            .check(p.key, *value)
+            .map_err(|e| failed(e.to_string()))?;
+    }
+    Ok((kind, v))
+}
