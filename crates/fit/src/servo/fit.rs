@@ -106,6 +106,9 @@ pub struct ServoFit<'a> {
 /// logs' 1e5 (a fit of them takes about 2.5 s on 2 cores; of this many, under a minute).
 const MAX_SUBSTEPS_PER_REPLAY: f64 = 2e6;
 
+/// Relative change of the cost below which removing a friction term makes no difference.
+const NEGLIGIBLE_COST: f64 = 1e-6;
+
 /// Seed of the global search's random draws.
 const SEARCH_SEED: u64 = 0x5e4b0;
 
@@ -117,6 +120,9 @@ pub struct ServoFitResult {
     /// Each constant with its unit, value and 95 % interval ([`SERVO_NAMES`]; μm and μl only
     /// when fitted).
     pub estimates: Vec<ParameterEstimate>,
+    /// The friction terms (from `Fc` on) the fit drove to zero: no effect left on the replay,
+    /// reported as 0 without an interval (the records show none of them).
+    pub at_zero: Vec<&'static str>,
     /// Why the solver stopped.
     pub termination: Termination,
     /// Accepted iterations.
@@ -244,7 +250,11 @@ impl<'a> ServoFit<'a> {
     /// Stacked residuals `q_replayed − q_logged` of every record, with the record each
     /// begins at; `None` where a replay fails (the solver rejects the step).
     fn residuals(&self, theta: &[f64]) -> Option<Vec<f64>> {
-        let motor = self.motor(theta);
+        self.residuals_of(self.motor(theta))
+    }
+
+    /// [`ServoFit::residuals`] of `motor`.
+    fn residuals_of(&self, motor: ServoMotor) -> Option<Vec<f64>> {
         let mut out = Vec::new();
         for record in self.records {
             let rig = record.rig(motor);
@@ -260,13 +270,19 @@ impl<'a> ServoFit<'a> {
                         .map(|(s, m)| s - m),
                 );
                 if let (Some(tw), Some(w)) = (self.speed_weight_s, &record.w_rad_s) {
-                    out.extend(
-                        trace
-                            .w_rad_s
-                            .iter()
-                            .zip(&w[from..to])
-                            .map(|(s, m)| tw * (s - m)),
-                    );
+                    // A firmware's speed is an estimate over the last sample interval, not the
+                    // speed at the stamp: compare it with the replay's mean speed over the
+                    // same interval (the replay's own speed at the first stamp).
+                    let t = &record.t_s[from..to];
+                    let q = &trace.q_rad;
+                    out.extend((0..t.len()).map(|k| {
+                        let replayed = if k == 0 {
+                            trace.w_rad_s[0]
+                        } else {
+                            (q[k] - q[k - 1]) / (t[k] - t[k - 1])
+                        };
+                        tw * (replayed - w[from + k])
+                    }));
                 }
             }
         }
@@ -350,12 +366,13 @@ impl<'a> ServoFit<'a> {
         let theta0 = self.global_search(&theta0);
         let report = solve(self, &theta0, self.lm)?;
         let motor = self.motor(&report.params);
-        let estimates = self.estimates(&report.params);
+        let (estimates, at_zero) = self.estimates(&report.params);
         let scores = score_records(self.records, motor, self.mode, self.replay)?;
         let mae_rad = scores.iter().map(|s| s.mae_rad).sum::<f64>() / scores.len() as f64;
         Ok(ServoFitResult {
             motor,
             estimates,
+            at_zero,
             termination: report.termination,
             iterations: report.iterations,
             scores,
@@ -389,21 +406,41 @@ impl<'a> ServoFit<'a> {
     }
 
     /// The constants with 95 % intervals at `theta` (module docs).
-    fn estimates(&self, theta: &[f64]) -> Vec<ParameterEstimate> {
+    fn estimates(&self, theta: &[f64]) -> (Vec<ParameterEstimate>, Vec<&'static str>) {
+        let mut at_zero = vec![false; theta.len()];
         let half = self.jacobian(theta).and_then(|(r, jac)| {
+            // A friction term the fit drove towards zero, whose removal changes the replay's
+            // cost by less than [`NEGLIGIBLE_COST`]: its column of the Jacobian all but
+            // vanishes and its logarithm has no interval. It is reported at zero, and the
+            // others' intervals are those of the fit without it.
+            let cost = r.iter().map(|v| v * v).sum::<f64>();
+            for (k, zero) in at_zero.iter_mut().enumerate().skip(3) {
+                let mut c = constants(&self.motor(theta));
+                c[k] = 0.0;
+                let without = self.residuals_of(from_constants(c))?;
+                let cost0 = without.iter().map(|v| v * v).sum::<f64>();
+                *zero = (cost0 - cost).abs() <= NEGLIGIBLE_COST * cost;
+            }
+            let kept: Vec<usize> = (0..theta.len()).filter(|&k| !at_zero[k]).collect();
+            let jac = jac.select_columns(&kept);
             let normal = NormalEquations::from_jacobian(r.clone(), &jac);
             let white = uncertainty(&normal)?;
             let (series, runs) = self.series_runs();
             let score = newey_west_run_covariance(&r, &jac, &series, &runs)?;
             let hac = sandwich_uncertainty(&normal, &score)?;
-            at_least(hac, &white).map(|u| u.ci95_half_width)
+            let kept_half = at_least(hac, &white)?.ci95_half_width;
+            let mut half = vec![f64::NAN; theta.len()];
+            for (k, h) in kept.iter().zip(kept_half) {
+                half[*k] = h;
+            }
+            Some(half)
         });
         let values = constants(&self.motor(theta));
-        (0..self.n_params())
+        let estimates = (0..self.n_params())
             .map(|k| ParameterEstimate {
                 name: SERVO_NAMES[k],
                 unit: SERVO_UNITS[k],
-                value: values[k],
+                value: if at_zero[k] { 0.0 } else { values[k] },
                 // An interval reaching 0 or infinity in a positive constant is none.
                 ci95: half
                     .as_ref()
@@ -411,7 +448,12 @@ impl<'a> ServoFit<'a> {
                     .map(|h| [(theta[k] - h).exp(), (theta[k] + h).exp()])
                     .filter(|[lo, hi]| *lo > 0.0 && hi.is_finite()),
             })
-            .collect()
+            .collect();
+        let zero = (0..self.n_params())
+            .filter(|&k| at_zero[k])
+            .map(|k| SERVO_NAMES[k])
+            .collect();
+        (estimates, zero)
     }
 }
 

@@ -74,11 +74,15 @@ pub fn run(a: &Settings, paths: &[PathBuf], validate: &[PathBuf]) -> Result<()> 
             fit.mae_rad * 1e3,
             constant_mae * 1e3
         ))
-    } else if fit.estimates.iter().any(|e| e.ci95.is_none()) {
+    } else if fit
+        .estimates
+        .iter()
+        .any(|e| e.ci95.is_none() && !fit.at_zero.contains(&e.name))
+    {
         let open: Vec<&str> = fit
             .estimates
             .iter()
-            .filter(|e| e.ci95.is_none())
+            .filter(|e| e.ci95.is_none() && !fit.at_zero.contains(&e.name))
             .map(|e| e.name)
             .collect();
         Some(format!(
@@ -110,7 +114,8 @@ pub fn run(a: &Settings, paths: &[PathBuf], validate: &[PathBuf]) -> Result<()> 
             .map(|e| {
                 (
                     e.name.to_string(),
-                    json!({"value": e.value, "unit": e.unit, "ci95": e.ci95}),
+                    json!({"value": e.value, "unit": e.unit, "ci95": e.ci95,
+                        "at_zero": fit.at_zero.contains(&e.name)}),
                 )
             })
             .collect();
@@ -147,6 +152,11 @@ pub fn run(a: &Settings, paths: &[PathBuf], validate: &[PathBuf]) -> Result<()> 
                     "  {:<5} = {:<12.5} {:<10} 95 % [{lo:.5}, {hi:.5}]",
                     e.name,
                     e.value,
+                    e.unit
+                )?,
+                None if fit.at_zero.contains(&e.name) => outln!(
+                    "  {:<5} = 0            {:<10} (driven to zero: the records show none)",
+                    e.name,
                     e.unit
                 )?,
                 None => outln!(
