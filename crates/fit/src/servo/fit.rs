@@ -102,8 +102,8 @@ pub struct ServoFit<'a> {
     speed_weight_s: Option<f64>,
 }
 
-/// Most sub-steps one replay of all the records may take in a fit: 20 times the eight XL330
-/// logs' 1e5 (a fit of them takes about 2.5 s on 2 cores; of this many, under a minute).
+/// Most sub-steps one replay of all the records may take in a fit: 10 times the eight XL330
+/// logs' 2e5 (a fit of them takes about 6 s on 2 cores; of this many, about a minute).
 const MAX_SUBSTEPS_PER_REPLAY: f64 = 2e6;
 
 /// Relative change of the cost below which removing a friction term makes no difference.
