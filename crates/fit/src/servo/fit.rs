@@ -257,33 +257,23 @@ impl<'a> ServoFit<'a> {
     fn residuals_of(&self, motor: ServoMotor) -> Option<Vec<f64>> {
         let mut out = Vec::new();
         for record in self.records {
-            let rig = record.rig(motor);
-            {
-                let (from, to) = (0, record.t_s.len());
-                let run = record.window(self.mode, from, to).ok()?;
-                let trace = replay(&rig, &run, self.replay).ok()?;
-                out.extend(
-                    trace
-                        .q_rad
-                        .iter()
-                        .zip(&record.q_rad[from..to])
-                        .map(|(s, m)| s - m),
-                );
-                if let (Some(tw), Some(w)) = (self.speed_weight_s, &record.w_rad_s) {
-                    // A firmware's speed is an estimate over the last sample interval, not the
-                    // speed at the stamp: compare it with the replay's mean speed over the
-                    // same interval (the replay's own speed at the first stamp).
-                    let t = &record.t_s[from..to];
-                    let q = &trace.q_rad;
-                    out.extend((0..t.len()).map(|k| {
-                        let replayed = if k == 0 {
-                            trace.w_rad_s[0]
-                        } else {
-                            (q[k] - q[k - 1]) / (t[k] - t[k - 1])
-                        };
-                        tw * (replayed - w[from + k])
-                    }));
-                }
+            let run = record.run(self.mode).ok()?;
+            let trace = replay(&record.rig(motor), &run, self.replay).ok()?;
+            let q = &trace.q_rad;
+            out.extend(q.iter().zip(&record.q_rad).map(|(s, m)| s - m));
+            if let (Some(tw), Some(w)) = (self.speed_weight_s, &record.w_rad_s) {
+                // A firmware's speed is an estimate over the last sample interval, not the
+                // speed at the stamp: compare it with the replay's mean speed over the same
+                // interval (the replay's own speed at the first stamp).
+                let t = &record.t_s;
+                out.extend((0..t.len()).map(|k| {
+                    let replayed = if k == 0 {
+                        trace.w_rad_s[0]
+                    } else {
+                        (q[k] - q[k - 1]) / (t[k] - t[k - 1])
+                    };
+                    tw * (replayed - w[k])
+                }));
             }
         }
         out.iter().all(|v| v.is_finite()).then_some(out)
@@ -343,12 +333,12 @@ impl<'a> ServoFit<'a> {
                 ),
             });
         }
-        let start = self.motor(
-            &constants(&self.start)[..self.n_params()]
-                .iter()
-                .map(|v| v.max(1e-6).ln())
-                .collect::<Vec<_>>(),
-        );
+        // A size of 0 has no logarithm: the search starts such a term small instead.
+        let theta0: Vec<f64> = constants(&self.start)[..self.n_params()]
+            .iter()
+            .map(|v| v.max(1e-6).ln())
+            .collect();
+        let start = self.motor(&theta0);
         for record in self.records {
             let run = record.run(self.mode)?;
             replay(&record.rig(start), &run, self.replay).map_err(|e| FitError::BadData {
@@ -358,11 +348,6 @@ impl<'a> ServoFit<'a> {
                 ),
             })?;
         }
-        // A size of 0 has no logarithm: the search starts such a term small instead.
-        let theta0: Vec<f64> = constants(&self.start)[..self.n_params()]
-            .iter()
-            .map(|v| v.max(1e-6).ln())
-            .collect();
         let theta0 = self.global_search(&theta0);
         let report = solve(self, &theta0, self.lm)?;
         let motor = self.motor(&report.params);

@@ -67,26 +67,14 @@ impl ServoRecord {
     /// The replay input of this record under `mode`; refuses a record with neither a voltage
     /// nor a duty with its supply (nor, in closed loop, a set-point with a controller).
     pub fn run(&self, mode: Loop) -> Result<ServoRun<'_>, FitError> {
-        self.window(mode, 0, self.t_s.len())
-    }
-
-    /// The replay input of samples `from..to` of this record under `mode`, started from the
-    /// logged angle and speed at `from` (the speed 0 where none is logged).
-    pub fn window<'a>(
-        &'a self,
-        mode: Loop,
-        from: usize,
-        to: usize,
-    ) -> Result<ServoRun<'a>, FitError> {
-        let cut = |v: &'a Option<Vec<f64>>| v.as_deref().and_then(move |v| v.get(from..to));
         let drive = if self.closed_loop(mode) {
             ServoDrive::Goal {
-                goal_rad: cut(&self.goal_rad).unwrap_or_default(),
-                supply_v: cut(&self.supply_v).unwrap_or_default(),
+                goal_rad: self.goal_rad.as_deref().unwrap_or_default(),
+                supply_v: self.supply_v.as_deref().unwrap_or_default(),
             }
-        } else if let (Some(duty), Some(supply_v)) = (cut(&self.duty), cut(&self.supply_v)) {
+        } else if let (Some(duty), Some(supply_v)) = (&self.duty, &self.supply_v) {
             ServoDrive::Duty { duty, supply_v }
-        } else if let Some(v) = cut(&self.voltage_v) {
+        } else if let Some(v) = &self.voltage_v {
             ServoDrive::Voltage(v)
         } else {
             return Err(FitError::BadData {
@@ -94,15 +82,16 @@ impl ServoRecord {
                 reason: "no input: give `voltage`, or `duty` with `supply`, or `goal` with `supply` and a controller".into(),
             });
         };
+        // Started from the logged angle and speed (0 where no speed is logged).
         Ok(ServoRun {
-            t_s: self.t_s.get(from..to).unwrap_or_default(),
+            t_s: &self.t_s,
             drive,
-            enable: self.enable.as_deref().and_then(|e| e.get(from..to)),
-            q0_rad: self.q_rad.get(from).copied().unwrap_or(0.0),
+            enable: self.enable.as_deref(),
+            q0_rad: self.q_rad.first().copied().unwrap_or(0.0),
             w0_rad_s: self
                 .w_rad_s
                 .as_ref()
-                .and_then(|w| w.get(from).copied())
+                .and_then(|w| w.first().copied())
                 .unwrap_or(0.0),
         })
     }
